@@ -1,0 +1,122 @@
+"""The run log (contracts §2): what a run commanded and what the robot did, as HDF5.
+
+`RunLog` collects arrays and events during or after a run; `write_run_log`
+writes them atomically (a temporary file in the same directory, then a
+rename), so a crash never leaves a half-written log under the requested name.
+`read_run_log` reads one back (tests, notebooks, plots).
+
+Layout (contracts §2; extensions are marked +):
+  /policy/time (P,) /policy/mean (P,6) /policy/std (P,6)
+  /command/time (M,) /command/twist (M,6)
+  /robot/time (K,) /robot/q (K,7) /robot/v (K,7) /robot/workpiece_pose (K,7)
+  /events  compound (time f8, kind str, detail str)
+  / attrs: scenario, model, gesture_source, completed, faces_inspected,
+           completion_time, + format = "rtcohand-runlog", + version = 1
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import os
+import tempfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rtcohand_drake.errors import InputError
+
+RUNLOG_FORMAT = "rtcohand-runlog"
+RUNLOG_VERSION = 1
+
+
+@dc.dataclass
+class Event:
+    time: float
+    kind: str
+    detail: str = ""
+
+
+@dc.dataclass
+class RunLog:
+    scenario: str = ""
+    model: str = ""
+    gesture_source: str = ""
+    completed: bool = False
+    faces_inspected: int = 0
+    completion_time: float = float("nan")
+    policy_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    policy_mean: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
+    policy_std: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
+    command_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    command_twist: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
+    robot_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    robot_q: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    robot_v: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    robot_workpiece_pose: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    events: list[Event] = dc.field(default_factory=list)
+    extra_attrs: dict = dc.field(default_factory=dict)
+
+    def add_event(self, time: float, kind: str, detail: str = "") -> None:
+        self.events.append(Event(float(time), kind, detail))
+
+
+_DATASETS = {
+    "policy/time": "policy_time", "policy/mean": "policy_mean", "policy/std": "policy_std",
+    "command/time": "command_time", "command/twist": "command_twist",
+    "robot/time": "robot_time", "robot/q": "robot_q", "robot/v": "robot_v",
+    "robot/workpiece_pose": "robot_workpiece_pose",
+}
+_EVENT_DTYPE = np.dtype([("time", "f8"), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
+
+
+def write_run_log(path: str | Path, log: RunLog) -> Path:
+    """Writes `log` to `path` atomically; returns the path."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(f"{path}: cannot write the run log: directory {directory} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = RUNLOG_FORMAT
+            f.attrs["version"] = RUNLOG_VERSION
+            for key in ("scenario", "model", "gesture_source"):
+                f.attrs[key] = getattr(log, key)
+            f.attrs["completed"] = bool(log.completed)
+            f.attrs["faces_inspected"] = int(log.faces_inspected)
+            f.attrs["completion_time"] = float(log.completion_time)
+            for key, value in log.extra_attrs.items():
+                f.attrs[key] = value
+            for name, field in _DATASETS.items():
+                f.create_dataset(name, data=np.asarray(getattr(log, field), dtype=np.float64))
+            events = np.array([(e.time, e.kind, e.detail) for e in log.events], dtype=_EVENT_DTYPE)
+            f.create_dataset("events", data=events, dtype=_EVENT_DTYPE)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_run_log(path: str | Path) -> RunLog:
+    path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            log = RunLog(
+                scenario=str(f.attrs.get("scenario", "")), model=str(f.attrs.get("model", "")),
+                gesture_source=str(f.attrs.get("gesture_source", "")),
+                completed=bool(f.attrs.get("completed", False)),
+                faces_inspected=int(f.attrs.get("faces_inspected", 0)),
+                completion_time=float(f.attrs.get("completion_time", np.nan)))
+            for name, field in _DATASETS.items():
+                if name in f:
+                    setattr(log, field, f[name][()])
+            if "events" in f:
+                for row in f["events"][()]:
+                    kind, detail = (x.decode() if isinstance(x, bytes) else str(x) for x in (row["kind"], row["detail"]))
+                    log.events.append(Event(float(row["time"]), kind, detail))
+    except (OSError, KeyError) as err:
+        raise InputError(f"{path}: not a readable run log: {err}") from None
+    return log

@@ -1,0 +1,232 @@
+"""Scenario files: YAML loaded into typed dataclasses.
+
+A scenario holds every number a user could want to change for a run: the cell
+layout, the arm's initial joint angles, time steps, limits and the workspace.
+`load_scenario("inspection")` loads the built-in file
+`rtcohand_drake/scenarios/inspection.yaml`; any other argument is a path.
+
+Files are parsed with Drake's `yaml_load_typed` after a check of every key
+against the schema below, so a typo (`max_linear_speed_ms`) or a wrong type is
+one line naming the file, the key path and the problem (`ScenarioError`).
+
+Units: metres, radians, seconds unless a field's name says otherwise
+(`rpy_deg`, `..._deg_s`).
+"""
+
+# No `from __future__ import annotations`: Drake's yaml_load_typed reads real field types.
+import dataclasses as dc
+import math
+import typing
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from rtcohand_drake.errors import InputError
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
+class ScenarioError(InputError):
+    """A scenario file that cannot be used; the message names file and problem."""
+
+
+@dc.dataclass
+class Pose:
+    """A rigid transform: translation (m) and roll-pitch-yaw (degrees)."""
+
+    xyz: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rpy_deg: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    def to_rigid_transform(self):
+        from pydrake.math import RigidTransform, RollPitchYaw
+
+        return RigidTransform(RollPitchYaw(np.deg2rad(self.rpy_deg)), np.asarray(self.xyz, float))
+
+
+@dc.dataclass
+class Box:
+    """An axis-aligned box in the world frame (m)."""
+
+    min_xyz: list[float] = dc.field(default_factory=lambda: [-1.0, -1.0, 0.0])
+    max_xyz: list[float] = dc.field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+    def contains(self, p) -> bool:
+        p = np.asarray(p, float)
+        return bool(np.all(p >= self.min_xyz) and np.all(p <= self.max_xyz))
+
+
+@dc.dataclass
+class Cell:
+    """Where things stand, all in the world frame (origin: robot base on the table top)."""
+
+    # Table top at z = 0; the table model's frame is on its top surface.
+    table: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.2, 0.15, 0.0]))
+    # Mold frame: centre of the cavity floor's bottom face, on the table top.
+    mold: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.45, -0.2, 0.0]))
+    # Safety glass panel: bottom centre of the panel.
+    safety_glass: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.1, 0.95, 0.0]))
+    # The inspector model's frame (on the floor below the eyes); its `eye` frame is the eye point.
+    inspector: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.1, 1.45, -0.75], rpy_deg=[0, 0, -90]))
+    # Inspector's eye point in the world (used by the inspection measure).
+    eye_xyz: list[float] = dc.field(default_factory=lambda: [0.1, 1.35, 0.85])
+    # The user frame U (contracts §6) in the world: X to the inspector's right, Y away
+    # from the inspector toward the robot, Z up.
+    user_frame: Pose = dc.field(default_factory=lambda: Pose(rpy_deg=[0, 0, 180]))
+
+
+@dc.dataclass
+class Robot:
+    # Arm joint angles at start (rad): the workpiece rests in the mold.
+    q0_rad: list[float] = dc.field(default_factory=lambda: [0.0] * 7)
+    # Joint-space PD gains of the simulated arm's position-velocity servo.
+    kp_nm_per_rad: list[float] = dc.field(default_factory=lambda: [2000.0] * 4 + [500.0] * 3)
+    kd_nm_s_per_rad: list[float] = dc.field(default_factory=lambda: [80.0] * 4 + [20.0] * 3)
+
+
+@dc.dataclass
+class DiffIk:
+    """Differential inverse kinematics limits and gains."""
+
+    # Fraction of the actuators' speed limits (80 deg/s large, 70 deg/s small) the solver may use.
+    joint_velocity_fraction: float = 0.5
+    joint_acceleration_rad_s2: float = 4.0
+    # Keep this far inside the limited joints' position limits (MoveIt Servo's default margin).
+    joint_position_margin_rad: float = 0.1
+    # Continuous joints have no limit; the solver uses +-this to stay finite.
+    continuous_joint_range_rad: float = 4 * math.pi
+    # Cartesian speed limits on the workpiece centre (ISO 10218 reduced speed: 0.25 m/s).
+    max_linear_speed_m_s: float = 0.25
+    max_angular_speed_rad_s: float = 1.0
+    joint_centering_gain: float = 0.5
+    # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
+    follow_ratio_threshold: float = 0.9
+
+
+@dc.dataclass
+class TwistSegment:
+    """A constant commanded twist (user frame) held for a duration."""
+
+    duration_s: float = 1.0
+    twist: list[float] = dc.field(default_factory=lambda: [0.0] * 6)
+
+
+@dc.dataclass
+class Scenario:
+    name: str = "unnamed"
+    # MultibodyPlant discrete time step (s).
+    plant_time_step_s: float = 0.005
+    # Period of the differential IK controller (s).
+    control_period_s: float = 0.01
+    # Rate at which the run log samples the robot (Hz); contracts §2 ask for >= 50.
+    log_rate_hz: float = 50.0
+    duration_s: float = 60.0
+    cell: Cell = dc.field(default_factory=Cell)
+    robot: Robot = dc.field(default_factory=Robot)
+    diff_ik: DiffIk = dc.field(default_factory=DiffIk)
+    # Where the workpiece centre may go (world frame).
+    workspace: Box = dc.field(default_factory=Box)
+    # A scripted twist sequence, for runs without a gesture pipeline.
+    scripted_motion: list[TwistSegment] = dc.field(default_factory=list)
+
+
+# Fixed lengths of list fields, checked on load.
+_LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3, "eye_xyz": 3,
+            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6}
+
+
+def builtin_scenarios() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+def resolve_scenario_path(name_or_path: str | Path) -> Path:
+    """A built-in name (`inspection`) or a path to a YAML file."""
+    text = str(name_or_path)
+    if (SCENARIO_DIR / f"{text}.yaml").is_file() and not Path(text).suffix:
+        return SCENARIO_DIR / f"{text}.yaml"
+    path = Path(text)
+    if path.is_file():
+        return path
+    raise ScenarioError(
+        f"{text}: no such scenario file or built-in scenario "
+        f"(built-in: {', '.join(builtin_scenarios()) or 'none'})")
+
+
+def _check_against_schema(node, schema, where: str, source: str) -> None:
+    """Finds unknown keys and wrong shapes with their full key path."""
+    if dc.is_dataclass(schema):
+        if not isinstance(node, dict):
+            raise ScenarioError(f"{source}: {where or 'top level'}: expected a mapping, got {type(node).__name__}")
+        hints = typing.get_type_hints(schema)
+        known = {f.name for f in dc.fields(schema)}
+        for key, value in node.items():
+            path = f"{where}.{key}" if where else str(key)
+            if key not in known:
+                raise ScenarioError(f"{source}: {path}: unknown key (known here: {', '.join(sorted(known))})")
+            _check_against_schema(value, hints[key], path, source)
+        return
+    origin = typing.get_origin(schema)
+    if origin is list:
+        if not isinstance(node, list):
+            raise ScenarioError(f"{source}: {where}: expected a list, got {node!r}")
+        (item_type,) = typing.get_args(schema)
+        leaf = where.rsplit(".", 1)[-1]
+        if leaf in _LENGTHS and len(node) != _LENGTHS[leaf]:
+            raise ScenarioError(f"{source}: {where}: expected {_LENGTHS[leaf]} numbers, got {len(node)}")
+        for i, item in enumerate(node):
+            _check_against_schema(item, item_type, f"{where}[{i}]", source)
+        return
+    if schema is float:
+        if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
+            raise ScenarioError(f"{source}: {where}: expected a finite number, got {node!r}")
+    elif schema is str and not isinstance(node, str):
+        raise ScenarioError(f"{source}: {where}: expected text, got {node!r}")
+
+
+def _check_values(s: Scenario, source: str) -> None:
+    def need(cond: bool, what: str):
+        if not cond:
+            raise ScenarioError(f"{source}: {what}")
+
+    need(s.plant_time_step_s > 0, "plant_time_step_s must be > 0")
+    need(s.control_period_s >= s.plant_time_step_s, "control_period_s must be >= plant_time_step_s")
+    need(s.log_rate_hz >= 50, "log_rate_hz must be >= 50 (contracts: robot log at least 50 Hz)")
+    need(s.duration_s > 0, "duration_s must be > 0")
+    need(0 < s.diff_ik.joint_velocity_fraction <= 1, "diff_ik.joint_velocity_fraction must be in (0, 1]")
+    need(s.diff_ik.max_linear_speed_m_s > 0, "diff_ik.max_linear_speed_m_s must be > 0")
+    need(s.diff_ik.max_angular_speed_rad_s > 0, "diff_ik.max_angular_speed_rad_s must be > 0")
+    need(s.diff_ik.joint_acceleration_rad_s2 > 0, "diff_ik.joint_acceleration_rad_s2 must be > 0")
+    need(all(a < b for a, b in zip(s.workspace.min_xyz, s.workspace.max_xyz)),
+         "workspace: min_xyz must be below max_xyz on every axis")
+    for i, seg in enumerate(s.scripted_motion):
+        need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Loads and validates a scenario; raises ScenarioError (one line) on bad input."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    path = resolve_scenario_path(name_or_path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ScenarioError(f"{source}: cannot read: {err}") from None
+    try:
+        node = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        at = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(err, "problem", None) or "malformed YAML"
+        raise ScenarioError(f"{source}: {at}malformed YAML ({problem})") from None
+    if node is None:
+        node = {}
+    _check_against_schema(node, Scenario, "", source)
+    try:
+        scenario = yaml_load_typed(schema=Scenario, data=text)
+    except Exception as err:  # the schema check above catches nearly everything first
+        raise ScenarioError(f"{source}: {err}") from None
+    if scenario.name == "unnamed":
+        scenario.name = path.stem
+    _check_values(scenario, source)
+    return scenario

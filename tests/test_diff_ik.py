@@ -1,0 +1,124 @@
+"""Differential IK: follows a commanded workpiece twist and respects every limit."""
+
+import numpy as np
+import pytest
+from pydrake.math import RotationMatrix
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from rtcohand_drake.diff_ik import FollowStatus, TwistToJointVelocity, clamp_twist
+from rtcohand_drake.initial_pose import GEN3_HOME_RAD
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.station import make_sim_station
+
+# A posture with the workpiece in free space, well away from joint limits.
+Q_FREE = GEN3_HOME_RAD + np.deg2rad([10, 10, 0, 15, 0, -10, 0])
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    s = load_scenario("inspection")
+    s.robot.q0_rad = list(Q_FREE)
+    return s
+
+
+@pytest.fixture(scope="module")
+def controller(scenario):
+    return TwistToJointVelocity(scenario)
+
+
+def test_clamp_twist_keeps_direction():
+    t = clamp_twist(np.array([0.3, 0.4, 0, 0, 0, 2.0]), 0.25, 1.0)
+    assert np.linalg.norm(t[:3]) == pytest.approx(0.25)
+    assert np.allclose(t[:3] / np.linalg.norm(t[:3]), [0.6, 0.8, 0])
+    assert t[5] == pytest.approx(1.0)
+
+
+def test_user_frame_mapping(controller, scenario):
+    """A user-frame twist becomes [w_W; v_W] with R_WU from the scenario."""
+    R_WU = RotationMatrix.MakeZRotation(np.pi)  # inspection.yaml: U is the world turned 180 deg about z
+    twist = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    V = controller.desired_spatial_velocity(twist)
+    assert np.allclose(V[3:], R_WU.multiply(twist[:3]))
+    assert np.allclose(V[:3], R_WU.multiply(twist[3:]))
+
+
+def _closed_loop(scenario, twist, duration):
+    builder = DiagramBuilder()
+    station = builder.AddSystem(make_sim_station(scenario))
+    ik = builder.AddSystem(TwistToJointVelocity(scenario))
+    builder.Connect(station.GetOutputPort("gen3.position_measured"), ik.GetInputPort("gen3.position_measured"))
+    builder.Connect(ik.GetOutputPort("gen3.velocity_command"), station.GetInputPort("gen3.velocity_command"))
+    builder.ExportInput(ik.GetInputPort("twist_command"), "twist")
+    diagram = builder.Build()
+    sim = Simulator(diagram)
+    ctx = sim.get_mutable_context()
+    diagram.GetInputPort("twist").FixValue(ctx, twist)
+    samples = []
+    dt = scenario.control_period_s
+    for k in range(int(round(duration / dt))):
+        t = (k + 0.5) * dt  # mid-period: exactly one controller update between samples
+        sim.AdvanceTo(t)
+        samples.append((t,
+                        station.GetOutputPort("workpiece.pose").Eval(station.GetMyContextFromRoot(ctx)).copy(),
+                        station.GetOutputPort("gen3.position_measured").Eval(station.GetMyContextFromRoot(ctx)).copy(),
+                        ik.GetOutputPort("gen3.velocity_command").Eval(ik.GetMyContextFromRoot(ctx)).copy(),
+                        ik.GetOutputPort("follow_status").Eval(ik.GetMyContextFromRoot(ctx)).copy()))
+    return ik, samples
+
+
+def _rotation(pose):
+    from pydrake.common.eigen_geometry import Quaternion
+
+    q = pose[3:7] / np.linalg.norm(pose[3:7])
+    return RotationMatrix(Quaternion(q)).matrix()
+
+
+@pytest.mark.parametrize("twist", [
+    [0.05, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.0, 0.04, -0.03, 0.0, 0.0, 0.0],
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.15],
+    [0.03, -0.02, 0.02, 0.1, -0.05, 0.08],
+])
+def test_follows_twist_in_free_space(scenario, twist):
+    """Steady-state workpiece twist (user frame) within 5% of the command."""
+    twist = np.array(twist)
+    ik, samples = _closed_loop(scenario, twist, 1.5)
+    (t0, p0, *_), (t1, p1, *_) = samples[-51], samples[-1]  # the last 0.5 s
+    R_UW = RotationMatrix.MakeZRotation(np.pi).inverse().matrix()
+    v_U = R_UW @ (p1[:3] - p0[:3]) / (t1 - t0)
+    R_rel = _rotation(p1) @ _rotation(p0).T  # world-frame rotation over the window
+    angle_axis = RotationMatrix(R_rel).ToAngleAxis()
+    w_U = R_UW @ (angle_axis.axis() * angle_axis.angle()) / (t1 - t0)
+    achieved = np.concatenate([v_U, w_U])
+    error = np.linalg.norm(achieved - twist) / np.linalg.norm(twist)
+    assert error < 0.05, (achieved, twist)
+    assert all(s[4][0] == FollowStatus.FOLLOWING for s in samples[-50:])
+
+
+def test_never_exceeds_limits_when_driven_into_them(scenario):
+    """A long fast twist drives the arm to its limits; no limit is ever exceeded."""
+    ik, samples = _closed_loop(scenario, np.array([0.0, 0.0, 0.0, 0.0, 0.0, 5.0]), 12.0)
+    lower, upper = ik.joint_position_limits
+    v_max = ik.joint_velocity_limit
+    a_max = scenario.diff_ik.joint_acceleration_rad_s2
+    v_prev = np.zeros(7)
+    for _, pose, q, v, status in samples:
+        assert np.all(np.abs(v) <= v_max + 1e-6)
+        assert np.all(np.abs(v - v_prev) <= a_max * scenario.control_period_s + 1e-6)
+        assert np.all(q >= lower - 0.02) and np.all(q <= upper + 0.02)
+        v_prev = v
+    # The angular command was clamped to the Cartesian limit, then to joint limits: it reports so.
+    assert any(s[4][0] != FollowStatus.FOLLOWING for s in samples)
+
+
+def test_zero_twist_means_no_motion(scenario, controller):
+    v, status, _ = controller.solve(Q_FREE, np.zeros(7), np.zeros(6))
+    assert np.allclose(v, 0.0, atol=1e-9)
+    assert status == FollowStatus.FOLLOWING
+
+
+def test_non_finite_twist_is_treated_as_zero(controller):
+    v, status, _ = controller.solve(Q_FREE, np.zeros(7), np.array([np.nan, 0, 0, 0, np.inf, 0]))
+    assert np.allclose(v, 0.0, atol=1e-9)
+    assert status == FollowStatus.INVALID_INPUT
