@@ -13,7 +13,7 @@ import dataclasses as dc
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutputDuringSimulation, VectorLogSink
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from rtcohand_drake.diff_ik import TwistToJointVelocity
 from rtcohand_drake.run_log import RunLog
@@ -44,12 +44,12 @@ def build_run_diagram(scenario: Scenario, meshcat: Meshcat | None = None, statio
 
     period = 1.0 / scenario.log_rate_hz
     loggers = {
-        "robot_q": LogVectorOutputDuringSimulation(station.GetOutputPort("gen3.position_measured"), builder, period),
-        "robot_v": LogVectorOutputDuringSimulation(station.GetOutputPort("gen3.velocity_estimated"), builder, period),
-        "robot_workpiece_pose": LogVectorOutputDuringSimulation(station.GetOutputPort("workpiece.pose"), builder, period),
-        "command_twist": LogVectorOutputDuringSimulation(source.GetOutputPort("twist_command"), builder,
+        "robot_q": LogVectorOutput(station.GetOutputPort("gen3.position_measured"), builder, period),
+        "robot_v": LogVectorOutput(station.GetOutputPort("gen3.velocity_estimated"), builder, period),
+        "robot_workpiece_pose": LogVectorOutput(station.GetOutputPort("workpiece.pose"), builder, period),
+        "command_twist": LogVectorOutput(source.GetOutputPort("twist_command"), builder,
                                                          scenario.control_period_s),
-        "follow_status": LogVectorOutputDuringSimulation(controller.GetOutputPort("follow_status"), builder,
+        "follow_status": LogVectorOutput(controller.GetOutputPort("follow_status"), builder,
                                                          scenario.control_period_s),
     }
     visualizer = None

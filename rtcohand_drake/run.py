@@ -62,6 +62,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rtcohand_drake.diagram import build_run_diagram, collect_run_log, peak_speeds
     from rtcohand_drake.inspection import measure_inspection
     from rtcohand_drake.run_log import write_run_log
+    from rtcohand_drake.station import eye_position
 
     meshcat = None
     if not args.no_meshcat:
@@ -75,7 +76,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     simulator = Simulator(run.diagram)
     simulator.set_target_realtime_rate(rate)
-    simulator.set_publish_every_time_step(False)
     if run.visualizer is not None:
         run.visualizer.StartRecording(set_transforms_while_recording=True)
     simulator.Initialize()
@@ -89,7 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sim_time = root.get_time()
 
     log = collect_run_log(run, root, scenario)
-    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, scenario.cell.eye_xyz)
+    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
     log.completed, log.faces_inspected, log.completion_time = (
         result.completed, result.faces_inspected, result.completion_time)
     log.extra_attrs["seed"] = args.seed

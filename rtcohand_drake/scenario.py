@@ -61,18 +61,17 @@ class Cell:
     """Where things stand, all in the world frame (origin: robot base on the table top)."""
 
     # Table top at z = 0; the table model's frame is on its top surface.
-    table: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.2, 0.15, 0.0]))
-    # Mold frame: centre of the cavity floor's bottom face, on the table top.
-    mold: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.45, -0.2, 0.0]))
+    table: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.25, 0.15, 0.0]))
+    # Mold frame: centre of the cavity floor (the mold's floor slab is 0.03 m thick).
+    mold: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.45, -0.12, 0.03]))
     # Safety glass panel: bottom centre of the panel.
-    safety_glass: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.1, 0.95, 0.0]))
-    # The inspector model's frame (on the floor below the eyes); its `eye` frame is the eye point.
-    inspector: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.1, 1.45, -0.75], rpy_deg=[0, 0, -90]))
-    # Inspector's eye point in the world (used by the inspection measure).
-    eye_xyz: list[float] = dc.field(default_factory=lambda: [0.1, 1.35, 0.85])
+    safety_glass: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.25, 0.52, 0.0]))
+    # The inspector model's frame: on the floor below the eyes, x to the inspector's
+    # right, y forward. Its `eye` frame (1.6 m up) is the eye point of the inspection measure.
+    inspector: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.25, 1.0, -0.74], rpy_deg=[0, 0, 180]))
     # The user frame U (contracts §6) in the world: X to the inspector's right, Y away
     # from the inspector toward the robot, Z up.
-    user_frame: Pose = dc.field(default_factory=lambda: Pose(rpy_deg=[0, 0, 180]))
+    user_frame: Pose = dc.field(default_factory=lambda: Pose(xyz=[0.25, 1.0, 0.86], rpy_deg=[0, 0, 180]))
 
 
 @dc.dataclass
@@ -115,9 +114,9 @@ class TwistSegment:
 class Scenario:
     name: str = "unnamed"
     # MultibodyPlant discrete time step (s).
-    plant_time_step_s: float = 0.005
+    plant_time_step_s: float = 0.01
     # Period of the differential IK controller (s).
-    control_period_s: float = 0.01
+    control_period_s: float = 0.02
     # Rate at which the run log samples the robot (Hz); contracts §2 ask for >= 50.
     log_rate_hz: float = 50.0
     duration_s: float = 60.0
@@ -131,7 +130,7 @@ class Scenario:
 
 
 # Fixed lengths of list fields, checked on load.
-_LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3, "eye_xyz": 3,
+_LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3,
             "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6}
 
 

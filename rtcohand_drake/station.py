@@ -240,6 +240,13 @@ def make_sim_station(scenario: Scenario, name: str = "gen3_station") -> Diagram:
     return diagram
 
 
+def eye_position(scenario: Scenario) -> np.ndarray:
+    """The inspector's eye point in the world (the inspector model's `eye` frame)."""
+    plant, instances = make_control_plant(scenario)
+    context = plant.CreateDefaultContext()
+    return plant.GetFrameByName("eye", instances["inspector"]).CalcPoseInWorld(context).translation()
+
+
 def station_plant(station: Diagram) -> MultibodyPlant:
     return station.GetSubsystemByName("plant")
 
