@@ -111,6 +111,50 @@ class TwistSegment:
 
 
 @dc.dataclass
+class CommandFilter:
+    """The moving-average/downsampler between the policy and the safety supervisor."""
+
+    # "paper": a command every command_period_s = mean of the last `window` predictions
+    # (the paper's deployment: 2 Hz, 10 predictions). "responsive": a command at every
+    # policy update = mean of the last `responsive_window` predictions, rate-limited.
+    mode: str = "paper"
+    window: int = 10
+    command_period_s: float = 0.5
+    responsive_window: int = 3
+    # Per-axis clamp on the filtered twist [vx vy vz wx wy wz] (m/s, rad/s).
+    clamp: list[float] = dc.field(default_factory=lambda: [0.15, 0.15, 0.15, 0.8, 0.8, 0.8])
+    # Responsive mode's limit on how fast the command may change (m/s^2, rad/s^2).
+    max_linear_accel_m_s2: float = 0.5
+    max_angular_accel_rad_s2: float = 3.0
+
+
+@dc.dataclass
+class Safety:
+    """The safety supervisor between the filter and the differential IK."""
+
+    # Period of the supervisor's update (s).
+    period_s: float = 0.02
+    # Speed limits on the workpiece centre: ISO 10218 reduced speed 0.25 m/s.
+    max_linear_speed_m_s: float = 0.25
+    max_angular_speed_rad_s: float = 1.0
+    # Operator's sensitivity scale on the requested twist (Meshcat slider range).
+    sensitivity_default: float = 1.0
+    sensitivity_min: float = 0.25
+    sensitivity_max: float = 2.0
+    # A pause brings the workpiece to rest over this time (s).
+    pause_ramp_s: float = 0.5
+    # A gesture older than this (s), or flagged invalid, trips the watchdog.
+    stale_after_s: float = 0.3
+    # Minimum distance from the workpiece centre to the inspector's eye point (m).
+    min_inspector_distance_m: float = 0.55
+    # Look-ahead for the workspace and inspector-zone checks (s).
+    lookahead_s: float = 0.1
+    # Limit on how fast the output command may change (m/s^2, rad/s^2).
+    max_linear_accel_m_s2: float = 1.0
+    max_angular_accel_rad_s2: float = 6.0
+
+
+@dc.dataclass
 class Scenario:
     name: str = "unnamed"
     # MultibodyPlant discrete time step (s).
@@ -125,13 +169,15 @@ class Scenario:
     diff_ik: DiffIk = dc.field(default_factory=DiffIk)
     # Where the workpiece centre may go (world frame).
     workspace: Box = dc.field(default_factory=Box)
+    command_filter: CommandFilter = dc.field(default_factory=CommandFilter)
+    safety: Safety = dc.field(default_factory=Safety)
     # A scripted twist sequence, for runs without a gesture pipeline.
     scripted_motion: list[TwistSegment] = dc.field(default_factory=list)
 
 
 # Fixed lengths of list fields, checked on load.
 _LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3,
-            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6}
+            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6, "clamp": 6}
 
 
 def builtin_scenarios() -> list[str]:
@@ -178,6 +224,9 @@ def _check_against_schema(node, schema, where: str, source: str) -> None:
     if schema is float:
         if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
             raise ScenarioError(f"{source}: {where}: expected a finite number, got {node!r}")
+    elif schema is int:
+        if isinstance(node, bool) or not isinstance(node, int):
+            raise ScenarioError(f"{source}: {where}: expected a whole number, got {node!r}")
     elif schema is str and not isinstance(node, str):
         raise ScenarioError(f"{source}: {where}: expected text, got {node!r}")
 
@@ -197,6 +246,24 @@ def _check_values(s: Scenario, source: str) -> None:
     need(s.diff_ik.joint_acceleration_rad_s2 > 0, "diff_ik.joint_acceleration_rad_s2 must be > 0")
     need(all(a < b for a, b in zip(s.workspace.min_xyz, s.workspace.max_xyz)),
          "workspace: min_xyz must be below max_xyz on every axis")
+    f = s.command_filter
+    need(f.mode in ("paper", "responsive"), f"command_filter.mode must be 'paper' or 'responsive', got {f.mode!r}")
+    need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")
+    need(f.command_period_s > 0, "command_filter.command_period_s must be > 0")
+    need(all(c > 0 for c in f.clamp), "command_filter.clamp entries must be > 0")
+    need(f.max_linear_accel_m_s2 > 0 and f.max_angular_accel_rad_s2 > 0,
+         "command_filter acceleration limits must be > 0")
+    sa = s.safety
+    need(sa.period_s > 0, "safety.period_s must be > 0")
+    need(0 < sa.max_linear_speed_m_s <= 0.25,
+         "safety.max_linear_speed_m_s must be in (0, 0.25] (ISO 10218 reduced speed)")
+    need(sa.max_angular_speed_rad_s > 0, "safety.max_angular_speed_rad_s must be > 0")
+    need(0 < sa.sensitivity_min <= sa.sensitivity_default <= sa.sensitivity_max,
+         "safety: need 0 < sensitivity_min <= sensitivity_default <= sensitivity_max")
+    need(sa.pause_ramp_s > 0 and sa.stale_after_s > 0 and sa.lookahead_s >= 0,
+         "safety: pause_ramp_s and stale_after_s must be > 0, lookahead_s >= 0")
+    need(sa.max_linear_accel_m_s2 > 0 and sa.max_angular_accel_rad_s2 > 0,
+         "safety acceleration limits must be > 0")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 

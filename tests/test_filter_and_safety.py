@@ -1,0 +1,171 @@
+"""MovingAverageDownsampler and SafetySupervisor, each tested alone (fixed inputs, forced updates)."""
+
+import dataclasses as dc
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from rtcohand_drake.filtering import MovingAverageDownsampler
+from rtcohand_drake.safety import Intervention, Mode, SafetySupervisor
+from rtcohand_drake.scenario import Box, CommandFilter, Safety
+
+R_WU = np.diag([-1.0, -1.0, 1.0])  # the inspection cell's user frame: world turned 180 deg about z
+EYE = np.array([0.25, 1.0, 0.86])
+BOX = Box(min_xyz=[-0.3, -0.6, 0.03], max_xyz=[0.8, 0.42, 0.9])
+INSIDE = np.array([0.3, 0.0, 0.4, 1, 0, 0, 0])
+
+
+def _filter_run(config, inputs, period=0.1):
+    """Feeds one prediction per policy period; returns the output just before each next sample."""
+    f = MovingAverageDownsampler(config, period)
+    ctx = f.CreateDefaultContext()
+    sim = Simulator(f, ctx)
+    out = []
+    for k, y in enumerate(inputs):
+        f.GetInputPort("policy_mean").FixValue(ctx, np.asarray(y, float))
+        f.GetInputPort("resume_count").FixValue(ctx, [0.0])
+        sim.AdvanceTo(k * period + period / 2)
+        out.append(f.GetOutputPort("twist_request").Eval(ctx).copy())
+    return np.array(out)
+
+
+def test_paper_mode_is_a_2hz_mean_of_the_last_10():
+    config = CommandFilter(mode="paper", window=10, command_period_s=0.5, clamp=[1.0] * 6)
+    ys = [[0.01 * k, 0, 0, 0, 0, 0] for k in range(30)]
+    out = _filter_run(config, ys)
+    # Held constant between 2 Hz updates.
+    changes = np.flatnonzero(np.any(np.diff(out, axis=0) != 0, axis=1)) + 1
+    assert set(changes) <= {5, 10, 15, 20, 25}
+    # At t = 2.0 s (sample 20), the command is the mean of predictions 11..20.
+    assert out[20, 0] == pytest.approx(np.mean([0.01 * k for k in range(11, 21)]))
+
+
+def test_paper_mode_clamps_per_axis():
+    config = CommandFilter(mode="paper", clamp=[0.05, 0.05, 0.05, 0.2, 0.2, 0.2])
+    out = _filter_run(config, [[1.0, -1.0, 0.01, 5.0, 0, -5.0]] * 12)
+    assert np.allclose(out[-1], [0.05, -0.05, 0.01, 0.2, 0, -0.2])
+
+
+def test_responsive_mode_follows_faster_and_is_rate_limited():
+    step = [[0.1, 0, 0, 0, 0, 0]] * 20
+    paper = _filter_run(CommandFilter(mode="paper"), step)
+    resp_cfg = CommandFilter(mode="responsive", responsive_window=3, max_linear_accel_m_s2=0.5)
+    responsive = _filter_run(resp_cfg, step)
+    # Onset: first sample above 20% of the final value.
+    onset = lambda out: int(np.argmax(out[:, 0] > 0.02))
+    assert onset(responsive) * 3 <= onset(paper)
+    assert np.all(np.abs(np.diff(responsive[:, 0])) <= 0.5 * 0.1 + 1e-12)
+
+
+def test_non_finite_predictions_count_as_zero():
+    out = _filter_run(CommandFilter(mode="responsive"), [[np.nan, np.inf, 0, 0, 0, 0]] * 5)
+    assert np.all(np.isfinite(out)) and np.allclose(out, 0)
+
+
+def _supervisor(config=None, command_period=0.5, box=BOX):
+    config = config or Safety()
+    s = SafetySupervisor(config, box, R_WU, EYE, command_period)
+    ctx = s.CreateDefaultContext()
+    return s, ctx, Simulator(s, ctx)
+
+
+def _fix(s, ctx, request, valid=1.0, frame_time=None, pose=INSIDE, pause=0.0, sensitivity=1.0):
+    s.GetInputPort("twist_request").FixValue(ctx, np.asarray(request, float))
+    t = ctx.get_time() if frame_time is None else frame_time
+    s.GetInputPort("gesture_status").FixValue(ctx, [valid, t])
+    s.GetInputPort("workpiece.pose").FixValue(ctx, np.asarray(pose, float))
+    s.GetInputPort("operator").FixValue(ctx, [pause, sensitivity])
+
+
+def _advance(s, ctx, sim, seconds, **inputs):
+    """Advances in supervisor periods, refreshing the gesture timestamp unless told otherwise."""
+    out = []
+    end = ctx.get_time() + seconds
+    while ctx.get_time() < end - 1e-9:
+        _fix(s, ctx, **inputs)
+        sim.AdvanceTo(ctx.get_time() + 0.02)
+        out.append((s.GetOutputPort("twist_command").Eval(ctx).copy(), s.GetOutputPort("status").Eval(ctx).copy()))
+    return out
+
+
+def test_passes_a_valid_request_and_applies_sensitivity():
+    s, ctx, sim = _supervisor()
+    out = _advance(s, ctx, sim, 1.0, request=[0.05, 0, 0, 0, 0, 0.2], sensitivity=2.0)
+    assert np.allclose(out[-1][0], [0.1, 0, 0, 0, 0, 0.4])
+    assert out[-1][1][0] == Mode.RUNNING
+
+
+def test_sensitivity_is_clipped_to_its_range():
+    s, ctx, sim = _supervisor()
+    out = _advance(s, ctx, sim, 1.0, request=[0.04, 0, 0, 0, 0, 0], sensitivity=10.0)
+    assert out[-1][0][0] == pytest.approx(0.08)  # 2x at most
+
+
+def test_speed_limits_clamp_and_report():
+    s, ctx, sim = _supervisor()
+    out = _advance(s, ctx, sim, 2.0, request=[1.0, 1.0, 0, 3.0, 0, 0])
+    cmd, status = out[-1]
+    assert np.linalg.norm(cmd[:3]) == pytest.approx(0.25)
+    assert np.linalg.norm(cmd[3:]) == pytest.approx(1.0)
+    assert int(status[2]) & Intervention.SPEED_CLAMP
+
+
+@pytest.mark.parametrize("command_period", [0.5, 0.1])
+@pytest.mark.parametrize("fault", ["invalid", "stale", "nan"])
+def test_watchdog_zeroes_the_command_within_one_command_period(fault, command_period):
+    s, ctx, sim = _supervisor(command_period=command_period)
+    _advance(s, ctx, sim, 1.0, request=[0.1, 0, 0, 0, 0, 0.5])
+    t_fault = ctx.get_time()
+    kwargs = {"request": [0.1, 0, 0, 0, 0, 0.5]}
+    if fault == "invalid":
+        kwargs["valid"] = 0.0
+    elif fault == "stale":
+        kwargs["frame_time"] = t_fault - 0.0  # the last frame; time moves on without a new one
+    else:
+        kwargs["request"] = [np.nan, 0, 0, 0, 0, 0.5]
+    stale_after = Safety().stale_after_s if fault == "stale" else 0.0
+    out = _advance(s, ctx, sim, stale_after + command_period + 0.1, **kwargs)
+    deadline = int(round((stale_after + command_period) / 0.02))
+    assert np.allclose(out[deadline - 1][0], 0.0, atol=1e-12), out[deadline - 1]
+    assert out[-1][1][0] == Mode.WATCHDOG
+    norms = [np.linalg.norm(c) for c, _ in out]
+    assert all(b <= a + 1e-12 for a, b in zip(norms, norms[1:]))  # decays, never grows
+
+
+def test_pause_brings_to_rest_smoothly_and_resume_counts():
+    cfg = Safety(pause_ramp_s=0.5)
+    s, ctx, sim = _supervisor(cfg)
+    _advance(s, ctx, sim, 1.0, request=[0.1, 0, 0, 0, 0, 0])
+    paused = _advance(s, ctx, sim, 1.0, request=[0.1, 0, 0, 0, 0, 0], pause=1.0)
+    speeds = [c[0] for c, _ in paused]
+    assert speeds[0] > 0 and np.allclose(speeds[25:], 0.0)  # at rest within the 0.5 s ramp
+    assert max(abs(np.diff(speeds))) <= 0.1 * 0.02 / 0.5 + 1e-12  # a linear ramp, no jump
+    assert paused[-1][1][0] == Mode.PAUSED and paused[-1][1][1] == 0
+    resumed = _advance(s, ctx, sim, 0.5, request=[0.1, 0, 0, 0, 0, 0])
+    assert resumed[-1][1][1] == 1 and resumed[-1][1][0] == Mode.RUNNING
+
+
+def test_workspace_box_stops_outward_motion_only():
+    near_top = np.array([0.3, 0.0, 0.895, 1, 0, 0, 0])
+    s, ctx, sim = _supervisor()
+    out = _advance(s, ctx, sim, 1.0, request=[0.05, 0, 0.1, 0, 0, 0], pose=near_top)
+    cmd, status = out[-1]
+    assert cmd[2] == pytest.approx(0.0, abs=1e-12)  # no further up
+    assert cmd[0] == pytest.approx(0.05)  # sideways motion kept
+    assert int(status[2]) & Intervention.WORKSPACE
+    down = _advance(s, ctx, sim, 1.0, request=[0, 0, -0.1, 0, 0, 0], pose=near_top)
+    assert down[-1][0][2] == pytest.approx(-0.1)  # back inside is allowed
+
+
+def test_inspector_zone_blocks_approach_to_the_eye():
+    # Just outside the zone, in front of the eye (U +y is world -y).
+    close = np.concatenate([EYE + [0, -0.555, 0], [1, 0, 0, 0]])
+    wide = Box(min_xyz=[-2, -2, -2], max_xyz=[2, 2, 2])  # only the inspector zone can act
+    s, ctx, sim = _supervisor(Safety(min_inspector_distance_m=0.55), box=wide)
+    out = _advance(s, ctx, sim, 1.0, request=[0, -0.1, 0, 0, 0, 0], pose=close)  # U -y: toward the inspector
+    cmd, status = out[-1]
+    assert cmd[1] == pytest.approx(0.0, abs=1e-12)
+    assert int(status[2]) & Intervention.INSPECTOR_ZONE
+    away = _advance(s, ctx, sim, 1.0, request=[0, 0.1, 0, 0, 0, 0], pose=close)
+    assert away[-1][0][1] == pytest.approx(0.1)
