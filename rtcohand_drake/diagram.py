@@ -1,9 +1,13 @@
-"""Builds the run diagram: a twist source -> differential IK -> station, with loggers.
+"""Builds the run diagram from the scenario, by named ports.
 
-`build_run_diagram(scenario, ...)` wires the systems by their named ports and
-adds Drake `VectorLogSink`s for the run log, and a `MeshcatVisualizer` when a
-Meshcat is given. The returned `RunDiagram` keeps handles to the pieces a
-caller needs after the simulation (the log sinks, the visualiser).
+    gesture source -> CchpPolicy -> MovingAverageDownsampler -> SafetySupervisor
+        -> TwistToJointVelocity (diff IK) -> station (simulated Gen3 or Kortex arm)
+
+or, without a policy, a scripted twist source straight into the supervisor.
+An operator system (Meshcat panel or scripted) feeds the supervisor's pause and
+sensitivity input. `VectorLogSink`s record everything the run log needs, and a
+`MeshcatVisualizer` (plus the hand/twist/status overlay) draws the run when a
+Meshcat is given. `RunDiagram` keeps handles to the pieces.
 """
 
 from __future__ import annotations
@@ -12,14 +16,17 @@ import dataclasses as dc
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
-from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from rtcohand_drake.diff_ik import TwistToJointVelocity
+from rtcohand_drake.diff_ik import FollowStatus, TwistToJointVelocity
+from rtcohand_drake.filtering import MovingAverageDownsampler
+from rtcohand_drake.operator_panel import MeshcatOperatorPanel, ScriptedOperator
 from rtcohand_drake.run_log import RunLog
+from rtcohand_drake.safety import Intervention, Mode, SafetySupervisor
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.scripted import ScriptedTwist
-from rtcohand_drake.station import make_sim_station
+from rtcohand_drake.station import eye_position, make_sim_station
 
 
 @dc.dataclass
@@ -27,39 +34,93 @@ class RunDiagram:
     diagram: Diagram
     station: Diagram
     controller: TwistToJointVelocity
-    source: object
+    supervisor: SafetySupervisor
+    source: LeafSystem
+    operator: LeafSystem
     loggers: dict  # name -> VectorLogSink
+    policy: LeafSystem | None = None
+    command_filter: MovingAverageDownsampler | None = None
     visualizer: MeshcatVisualizer | None = None
+    overlay: LeafSystem | None = None
     gesture_source: str = "scripted"
 
 
-def build_run_diagram(scenario: Scenario, meshcat: Meshcat | None = None, station: Diagram | None = None) -> RunDiagram:
+def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, policy: LeafSystem | None = None,
+                      operator: LeafSystem | None = None, meshcat: Meshcat | None = None,
+                      station: Diagram | None = None, gesture_source: str | None = None) -> RunDiagram:
+    """Wires a run. Without `policy`, `source` must offer `twist_request` (default: the scenario's script)."""
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", station or make_sim_station(scenario))
     controller = builder.AddNamedSystem("diff_ik", TwistToJointVelocity(scenario))
-    source = builder.AddNamedSystem("scripted_twist", ScriptedTwist(scenario.scripted_motion))
-    builder.Connect(source.GetOutputPort("twist_command"), controller.GetInputPort("twist_command"))
-    builder.Connect(station.GetOutputPort("gen3.position_measured"), controller.GetInputPort("gen3.position_measured"))
-    builder.Connect(controller.GetOutputPort("gen3.velocity_command"), station.GetInputPort("gen3.velocity_command"))
+    R_WU = scenario.cell.user_frame.to_rigid_transform().rotation().matrix()
+    command_period = (scenario.command_filter.command_period_s if scenario.command_filter.mode == "paper"
+                      else 1.0 / scenario.policy.rate_hz)
+    supervisor = builder.AddNamedSystem("safety", SafetySupervisor(
+        scenario.safety, scenario.workspace, R_WU, eye_position(scenario), command_period))
+    if operator is None:
+        operator = MeshcatOperatorPanel(meshcat, scenario.safety) if meshcat is not None else ScriptedOperator()
+    operator = builder.AddNamedSystem("operator", operator)
+    source = builder.AddNamedSystem("gesture_source" if policy is not None else "scripted_twist",
+                                    source or ScriptedTwist(scenario.scripted_motion))
 
-    period = 1.0 / scenario.log_rate_hz
+    connect = builder.Connect
+    connect(operator.GetOutputPort("operator"), supervisor.GetInputPort("operator"))
+    connect(source.GetOutputPort("gesture_status"), supervisor.GetInputPort("gesture_status"))
+    connect(station.GetOutputPort("workpiece.pose"), supervisor.GetInputPort("workpiece.pose"))
+    command_filter = None
+    if policy is not None:
+        policy = builder.AddNamedSystem("cchp_policy", policy)
+        command_filter = builder.AddNamedSystem(
+            "moving_average", MovingAverageDownsampler(scenario.command_filter, 1.0 / scenario.policy.rate_hz))
+        connect(source.GetOutputPort("gesture_features"), policy.GetInputPort("gesture_features"))
+        connect(supervisor.GetOutputPort("resume_count"), policy.GetInputPort("resume_count"))
+        connect(supervisor.GetOutputPort("resume_count"), command_filter.GetInputPort("resume_count"))
+        connect(policy.GetOutputPort("policy_mean"), command_filter.GetInputPort("policy_mean"))
+        connect(command_filter.GetOutputPort("twist_request"), supervisor.GetInputPort("twist_request"))
+    else:
+        connect(source.GetOutputPort("twist_request"), supervisor.GetInputPort("twist_request"))
+    connect(supervisor.GetOutputPort("twist_command"), controller.GetInputPort("twist_command"))
+    connect(station.GetOutputPort("gen3.position_measured"), controller.GetInputPort("gen3.position_measured"))
+    connect(controller.GetOutputPort("gen3.velocity_command"), station.GetInputPort("gen3.velocity_command"))
+
+    robot_period = 1.0 / scenario.log_rate_hz
+    log = lambda port, period: LogVectorOutput(port, builder, period)
     loggers = {
-        "robot_q": LogVectorOutput(station.GetOutputPort("gen3.position_measured"), builder, period),
-        "robot_v": LogVectorOutput(station.GetOutputPort("gen3.velocity_estimated"), builder, period),
-        "robot_workpiece_pose": LogVectorOutput(station.GetOutputPort("workpiece.pose"), builder, period),
-        "command_twist": LogVectorOutput(source.GetOutputPort("twist_command"), builder,
-                                                         scenario.control_period_s),
-        "follow_status": LogVectorOutput(controller.GetOutputPort("follow_status"), builder,
-                                                         scenario.control_period_s),
+        "robot_q": log(station.GetOutputPort("gen3.position_measured"), robot_period),
+        "robot_v": log(station.GetOutputPort("gen3.velocity_estimated"), robot_period),
+        "robot_workpiece_pose": log(station.GetOutputPort("workpiece.pose"), robot_period),
+        "command_twist": log(supervisor.GetOutputPort("twist_command"), scenario.safety.period_s),
+        "safety_status": log(supervisor.GetOutputPort("status"), scenario.safety.period_s),
+        "follow_status": log(controller.GetOutputPort("follow_status"), scenario.control_period_s),
     }
-    visualizer = None
+    if policy is not None:
+        policy_period = 1.0 / scenario.policy.rate_hz
+        loggers["policy_mean"] = log(policy.GetOutputPort("policy_mean"), policy_period)
+        loggers["policy_std"] = log(policy.GetOutputPort("policy_std"), policy_period)
+    visualizer = overlay = None
     if meshcat is not None:
+        from rtcohand_drake.meshcat_overlay import RunOverlay
+
         visualizer = MeshcatVisualizer.AddToBuilder(
             builder, station.GetOutputPort("query_object"), meshcat,
             MeshcatVisualizerParams(role=Role.kIllustration, prefix="cell"))
+        overlay = builder.AddNamedSystem("overlay", RunOverlay(meshcat, scenario))
+        connect(source.GetOutputPort("keypoints") if source.HasOutputPort("keypoints")
+                else _nan_keypoints(builder), overlay.GetInputPort("keypoints"))
+        connect(supervisor.GetOutputPort("twist_command"), overlay.GetInputPort("twist_command"))
+        connect(supervisor.GetOutputPort("status"), overlay.GetInputPort("safety_status"))
+        connect(station.GetOutputPort("workpiece.pose"), overlay.GetInputPort("workpiece.pose"))
     diagram = builder.Build()
     diagram.set_name("rtcohand_run")
-    return RunDiagram(diagram, station, controller, source, loggers, visualizer)
+    name = gesture_source or ("scripted" if policy is None else type(source).__name__)
+    return RunDiagram(diagram, station, controller, supervisor, source, operator, loggers, policy,
+                      command_filter, visualizer, overlay, name)
+
+
+def _nan_keypoints(builder):
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    return builder.AddNamedSystem("no_hand", ConstantVectorSource(np.full(63, np.nan))).get_output_port()
 
 
 def _log_arrays(sink: VectorLogSink, root: Context):
@@ -67,24 +128,47 @@ def _log_arrays(sink: VectorLogSink, root: Context):
     return log.sample_times().copy(), log.data().T.copy()
 
 
+def _transition_events(log: RunLog, times, codes, describe) -> None:
+    previous = None
+    for t, code in zip(times, codes):
+        if code != previous:
+            kind, detail = describe(code, previous)
+            if kind:
+                log.add_event(t, kind, detail)
+            previous = code
+
+
 def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) -> RunLog:
-    """Turns the log sinks' contents into a RunLog (robot, command and IK events)."""
-    log = RunLog(scenario=scenario.name, gesture_source=run.gesture_source)
-    t, log.robot_q = _log_arrays(run.loggers["robot_q"], root_context)
-    log.robot_time = t
+    """Turns the log sinks' contents into a RunLog, with safety and IK events."""
+    log = RunLog(scenario=scenario.name, gesture_source=run.gesture_source,
+                 model=getattr(run.policy, "model_path", "") if run.policy is not None else "")
+    log.robot_time, log.robot_q = _log_arrays(run.loggers["robot_q"], root_context)
     _, log.robot_v = _log_arrays(run.loggers["robot_v"], root_context)
     _, log.robot_workpiece_pose = _log_arrays(run.loggers["robot_workpiece_pose"], root_context)
     log.command_time, log.command_twist = _log_arrays(run.loggers["command_twist"], root_context)
-    status_t, status = _log_arrays(run.loggers["follow_status"], root_context)
-    previous = 0
-    for t_k, (code, ratio) in zip(status_t, status):
-        code = int(round(code))
-        if code != previous:
-            from rtcohand_drake.diff_ik import FollowStatus
+    if "policy_mean" in run.loggers:
+        log.policy_time, log.policy_mean = _log_arrays(run.loggers["policy_mean"], root_context)
+        _, log.policy_std = _log_arrays(run.loggers["policy_std"], root_context)
 
-            kind = "ik_" + FollowStatus(code).name.lower() if code else "ik_following"
-            log.add_event(t_k, kind, f"achieved {ratio:.2f} of the commanded twist")
-            previous = code
+    t, status = _log_arrays(run.loggers["safety_status"], root_context)
+    modes = status[:, 0].round().astype(int)
+    kinds = {Mode.PAUSED: "pause", Mode.WATCHDOG: "watchdog", Mode.RUNNING: "resume"}
+    _transition_events(log, t, modes, lambda m, prev: (
+        (kinds[Mode(m)], f"supervisor {Mode(m).name.lower()}") if prev is not None or m != Mode.RUNNING
+        else (None, "")))
+    acted = status[:, 2].round().astype(int)
+    for flag, kind in ((Intervention.SPEED_CLAMP, "clamp"), (Intervention.WORKSPACE, "workspace"),
+                       (Intervention.INSPECTOR_ZONE, "inspector_zone"), (Intervention.NON_FINITE, "fault")):
+        on = (acted & int(flag)) != 0
+        _transition_events(log, t, on, lambda o, prev, kind=kind: (
+            (kind, f"{kind} limit acting") if o else (None, "")))
+
+    t, follow = _log_arrays(run.loggers["follow_status"], root_context)
+    codes = follow[:, 0].round().astype(int)
+    _transition_events(log, t, codes, lambda c, prev: (
+        ("ik_" + FollowStatus(c).name.lower(), "differential IK " + FollowStatus(c).name.lower().replace("_", " "))
+        if (prev is not None or c != FollowStatus.FOLLOWING) else (None, "")))
+    log.events.sort(key=lambda e: e.time)
     return log
 
 

@@ -1,11 +1,15 @@
 """`python -m rtcohand_drake.run`: build the diagram for a scenario, simulate it, log it.
 
-    python -m rtcohand_drake.run --scenario inspection [--duration S]
-        [--realtime-rate R] [--no-meshcat] [--seed N] [--log PATH.h5] [--html PATH.html]
+    python -m rtcohand_drake.run --scenario inspection        # a built-in name, or a path to a scenario YAML file
+        [--duration S] [--realtime-rate R] [--no-meshcat] [--seed N]
+        [--gesture-source synthetic|replay|camera|scripted]
+        [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
+        [--context-file PATH.h5 [--context-user USER]]
+        [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
 
 Prints the Meshcat URL (unless --no-meshcat), then a summary: faces
-inspected, completion time, peak workpiece speeds and events. Bad input exits
-with status 2 and one line on stderr.
+inspected, completion time, peak workpiece speeds and safety events. Bad input
+exits with status 2 and one line on stderr naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from typing import Sequence
 
 from rtcohand_drake.errors import InputError, run_cli
 
+GESTURE_SOURCES = ("synthetic", "replay", "camera", "scripted")
+
 
 class _ArgumentParser(argparse.ArgumentParser):
     def error(self, message):  # argparse's own errors: one line, status 2
@@ -28,11 +34,22 @@ class _ArgumentParser(argparse.ArgumentParser):
 def make_parser() -> argparse.ArgumentParser:
     p = _ArgumentParser(prog="python -m rtcohand_drake.run", description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="inspection", help="built-in scenario name or path to a YAML file")
-    p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the scenario's)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds (default: the scenario's, or the end of a replayed stream)")
     p.add_argument("--realtime-rate", type=float, default=None,
                    help="target real-time rate; 0 = as fast as possible (default 1 with Meshcat, 0 without)")
     p.add_argument("--no-meshcat", action="store_true", help="run headless")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated operator")
+    p.add_argument("--gesture-source", choices=GESTURE_SOURCES, default=None,
+                   help="default: replay with --gesture-file, else synthetic")
+    p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (contracts §1)")
+    p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order)")
+    p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
+    p.add_argument("--context-user", default=None, help="which user of --context-file")
+    p.add_argument("--user", default=None, help="the simulated operator's user id (synthetic source)")
+    p.add_argument("--model", type=Path, default=None, help="exported TorchScript policy (default: the scenario's)")
+    p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
+                   help="override the scenario's command_filter.mode")
     p.add_argument("--log", type=Path, default=None, help="write the run log (HDF5, contracts §2)")
     p.add_argument("--html", type=Path, default=None,
                    help="save the Meshcat animation as a standalone HTML file (default: beside --log)")
@@ -47,6 +64,96 @@ def _check_args(args) -> None:
     for path in (args.log, args.html):
         if path is not None and not (path.parent if str(path.parent) else Path(".")).is_dir():
             raise InputError(f"{path}: directory {path.parent} does not exist")
+    if args.gesture_source is None:
+        args.gesture_source = "replay" if args.gesture_file is not None else "synthetic"
+    if args.gesture_source == "replay" and args.gesture_file is None:
+        raise InputError("command line: --gesture-source replay needs --gesture-file PATH.h5")
+    if args.gesture_source != "replay" and (args.gesture_file is not None or args.clip is not None):
+        raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
+    if args.context_user is not None and args.context_file is None:
+        raise InputError("command line: --context-user goes with --context-file")
+
+
+def _resolve_model(args, scenario) -> Path:
+    if args.model is not None:
+        return args.model
+    model = Path(scenario.policy.model)
+    if model.is_absolute() or model.exists():
+        return model
+    from rtcohand_drake.model_files import models_dir
+
+    return models_dir() / model
+
+
+def _context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
+    """A user's own labelled clips from a dataset file, as (features, labels) pieces."""
+    from rtcohand_drake.data.dataset import load_policy_clips
+
+    clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
+    users = sorted({c.user for c in clips})
+    if not clips:
+        raise InputError(f"{path}: no labelled clips to use as context")
+    if user is None:
+        if len(users) > 1:
+            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user "
+                             f"({', '.join(users[:8])}{', ...' if len(users) > 8 else ''})")
+        user = users[0]
+    pieces = [(c.features, c.labels) for c in clips if c.user == user and c.name not in exclude]
+    if not pieces:
+        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {', '.join(users[:8])})")
+    return pieces, user
+
+
+def _replay_source(args, scenario):
+    from rtcohand_drake.data.dataset import find_clips, read_dataset, to_policy_clip
+    from rtcohand_drake.gestures import ReplayGestureSource
+    from rtcohand_drake.hand_features import resample
+
+    raw = sorted(read_dataset(args.gesture_file), key=lambda c: (c.user, c.clip_id))
+    if args.clip is not None:
+        raw = find_clips(raw, args.clip)
+        if not raw:
+            raise InputError(f"{args.gesture_file}: no clip or user named {args.clip!r}")
+    rate = scenario.policy.rate_hz
+    clips = [to_policy_clip(c, rate) for c in raw]
+    skeletons = [resample(c.keypoints.reshape(len(c.keypoints), -1).astype(float), c.times, rate)[0] for c in raw]
+    source = ReplayGestureSource(clips, rate, skeletons)
+    users = sorted({c.user for c in raw})
+    return source, users, {c.name for c in clips}
+
+
+def _build(args, scenario, meshcat):
+    from rtcohand_drake.diagram import build_run_diagram
+
+    if args.gesture_source == "scripted":
+        return build_run_diagram(scenario, meshcat=meshcat, gesture_source="scripted"), None
+    from rtcohand_drake.policy_system import CchpPolicy
+
+    model = _resolve_model(args, scenario)
+    rate = scenario.policy.rate_hz
+    end_time = None
+    if args.gesture_source == "replay":
+        source, users, names = _replay_source(args, scenario)
+        end_time = source.end_time
+        if args.context_file is not None:
+            pieces, _ = _context_pieces(args.context_file, args.context_user, rate)
+        else:  # the replayed user's other labelled clips in the same file
+            if len(users) != 1:
+                raise InputError(f"{args.gesture_file}: the replayed stream has {len(users)} users; "
+                                 "give their context with --context-file and --context-user")
+            pieces, _ = _context_pieces(args.gesture_file, users[0], rate, exclude=names)
+    elif args.gesture_source == "synthetic":
+        from rtcohand_drake.operator_sim import make_builtin_operator
+
+        source, builtin_pieces = make_builtin_operator(scenario, seed=args.seed, user=args.user)
+        pieces = (_context_pieces(args.context_file, args.context_user, rate)[0] if args.context_file
+                  else builtin_pieces)
+    else:
+        raise InputError("command line: --gesture-source camera needs a live hand tracker "
+                         "(pip install -e '.[camera]'); none is connected in this build")
+    policy = CchpPolicy(model, pieces, rate, seed=args.seed)
+    return build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat,
+                             gesture_source=args.gesture_source), end_time
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -55,11 +162,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rtcohand_drake.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
+    if args.filter_mode is not None:
+        scenario.command_filter.mode = args.filter_mode
 
-    # Imports that load pydrake and the models come after the argument checks.
+    # Imports that load pydrake, torch and the models come after the argument checks.
     from pydrake.systems.analysis import Simulator
 
-    from rtcohand_drake.diagram import build_run_diagram, collect_run_log, peak_speeds
+    from rtcohand_drake.diagram import collect_run_log, peak_speeds
     from rtcohand_drake.inspection import measure_inspection
     from rtcohand_drake.run_log import write_run_log
     from rtcohand_drake.station import eye_position
@@ -70,8 +179,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
         print(f"Meshcat: {meshcat.web_url()}", flush=True)
-    run = build_run_diagram(scenario, meshcat=meshcat)
-    duration = args.duration if args.duration is not None else scenario.duration_s
+    run, end_time = _build(args, scenario, meshcat)
+    duration = args.duration if args.duration is not None else (end_time or scenario.duration_s)
     rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if meshcat else 0.0)
 
     simulator = Simulator(run.diagram)
@@ -80,9 +189,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         run.visualizer.StartRecording(set_transforms_while_recording=True)
     simulator.Initialize()
     wall_start = time.perf_counter()
+    interrupted = False
     try:
         simulator.AdvanceTo(duration)
     except KeyboardInterrupt:
+        interrupted = True
         print("interrupted: stopping the run and writing what was recorded", file=sys.stderr)
     wall = time.perf_counter() - wall_start
     root = simulator.get_context()
@@ -92,8 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
     log.completed, log.faces_inspected, log.completion_time = (
         result.completed, result.faces_inspected, result.completion_time)
-    log.extra_attrs["seed"] = args.seed
-    log.extra_attrs["sim_duration_s"] = sim_time
+    log.extra_attrs.update(seed=args.seed, sim_duration_s=sim_time, interrupted=interrupted,
+                           filter_mode=scenario.command_filter.mode)
     if args.log is not None:
         write_run_log(args.log, log)
     html = args.html or (args.log.with_suffix(".html") if args.log is not None else None)
@@ -105,11 +216,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     v_peak, w_peak = peak_speeds(log.robot_time, log.robot_workpiece_pose)
     completion = f"{log.completion_time:.1f} s" if log.completed else "not completed"
-    print(f"scenario {scenario.name}: {sim_time:.1f} s simulated in {wall:.1f} s "
-          f"({sim_time / max(wall, 1e-9):.1f}x real time)")
+    print(f"scenario {scenario.name}, gesture source {run.gesture_source}: {sim_time:.1f} s simulated "
+          f"in {wall:.1f} s ({sim_time / max(wall, 1e-9):.1f}x real time)")
     print(f"faces inspected: {log.faces_inspected}/6, completion: {completion}")
     print(f"peak workpiece speed: {v_peak:.3f} m/s, {w_peak:.3f} rad/s")
-    kinds = {}
+    kinds: dict[str, int] = {}
     for e in log.events:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1
     print("events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
@@ -117,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"run log: {args.log}")
     if html is not None and run.visualizer is not None:
         print(f"animation: {html}")
-    return 0
+    return 130 if interrupted else 0
 
 
 def entry_point() -> None:

@@ -111,6 +111,16 @@ class TwistSegment:
 
 
 @dc.dataclass
+class Policy:
+    """The CCHP policy system."""
+
+    # Policy update rate (Hz); the paper's deployment runs at 10 Hz.
+    rate_hz: float = 10.0
+    # Exported TorchScript policy: a path, or a file name inside models/.
+    model: str = "cchp_default.pt"
+
+
+@dc.dataclass
 class CommandFilter:
     """The moving-average/downsampler between the policy and the safety supervisor."""
 
@@ -169,6 +179,7 @@ class Scenario:
     diff_ik: DiffIk = dc.field(default_factory=DiffIk)
     # Where the workpiece centre may go (world frame).
     workspace: Box = dc.field(default_factory=Box)
+    policy: Policy = dc.field(default_factory=Policy)
     command_filter: CommandFilter = dc.field(default_factory=CommandFilter)
     safety: Safety = dc.field(default_factory=Safety)
     # A scripted twist sequence, for runs without a gesture pipeline.
@@ -246,6 +257,7 @@ def _check_values(s: Scenario, source: str) -> None:
     need(s.diff_ik.joint_acceleration_rad_s2 > 0, "diff_ik.joint_acceleration_rad_s2 must be > 0")
     need(all(a < b for a, b in zip(s.workspace.min_xyz, s.workspace.max_xyz)),
          "workspace: min_xyz must be below max_xyz on every axis")
+    need(0 < s.policy.rate_hz <= 100, "policy.rate_hz must be in (0, 100]")
     f = s.command_filter
     need(f.mode in ("paper", "responsive"), f"command_filter.mode must be 'paper' or 'responsive', got {f.mode!r}")
     need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")

@@ -5,8 +5,9 @@ each segment holds a constant user-frame twist for its duration, with short
 cosine ramps at both ends so the command is continuous. After the last segment
 the command is zero.
 
-Output port
-  twist_command (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
+Output ports
+  twist_request  (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
+  gesture_status (2) [1, t]: a script is always a fresh, valid command
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ class ScriptedTwist(LeafSystem):
         self._starts = np.cumsum([0.0] + [s.duration_s for s in segments])
         self._twists = np.array([s.twist for s in segments], dtype=float).reshape(-1, 6)
         self._ramp = ramp_s
-        self.DeclareVectorOutputPort("twist_command", 6, self._calc)
+        self.DeclareVectorOutputPort("twist_request", 6, self._calc)
+        self.DeclareVectorOutputPort("gesture_status", 2, self._calc_status)
 
     @property
     def end_time(self) -> float:
@@ -43,3 +45,6 @@ class ScriptedTwist(LeafSystem):
 
     def _calc(self, context, output: BasicVector):
         output.SetFromVector(self.twist_at(context.get_time()))
+
+    def _calc_status(self, context, output: BasicVector):
+        output.SetFromVector([1.0, context.get_time()])

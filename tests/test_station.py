@@ -100,7 +100,8 @@ def test_velocity_command_is_tracked(scenario):
 def test_run_cli_headless_writes_log(tmp_path):
     log = tmp_path / "run.h5"
     proc = subprocess.run(
-        [sys.executable, "-m", "rtcohand_drake.run", "--scenario", "inspection", "--duration", "10",
+        [sys.executable, "-m", "rtcohand_drake.run", "--scenario", "inspection", "--gesture-source", "scripted",
+         "--duration", "10",
          "--realtime-rate", "0", "--no-meshcat", "--log", str(log)],
         capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

@@ -1,0 +1,383 @@
+"""The gesture dataset file (contracts §1): write, read and validate, and policy-rate clips.
+
+Layout (HDF5)::
+
+    /                         attrs: format = "rtcohand-gestures", version = 1
+    /users/<user_id>          attrs: group = "in-sample" | "out-sample"
+    /users/<user_id>/clips/<clip_id>
+        attrs:    fps (float >= 5), active_dims (int array), split ("train"|"test"|"none")
+        datasets: keypoints (N, 21, 3) float32 [NaN frame = hand lost],
+                  object_velocity (N, 6) float32 (optional),
+                  object_pose (N, 7) float32 (optional),
+                  timestamps (N,) float64 (optional, else i / fps)
+
+Optional extensions written here and ignored by readers that do not know them:
+a clip attribute ``description`` (the gestures the clip shows, as text) and a
+root attribute ``generator`` (the generator's configuration, JSON).
+
+Every problem a reader finds raises :class:`DatasetError`, whose text is one
+line: ``<file>: clip <user>/<clip>: <problem>`` (or ``<file>: <problem>`` for
+problems of the file itself).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from rtcohand_drake.errors import InputError
+from rtcohand_drake.hand_features import frame_times, hand_features, resample
+
+FORMAT = "rtcohand-gestures"
+VERSION = 1
+DIMENSIONS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+GROUPS = ("in-sample", "out-sample")
+SPLITS = ("train", "test", "none")
+MIN_FPS = 5.0
+
+
+class DatasetError(InputError):
+    """A dataset file breaks the contract. ``str(err)`` is one line naming file, clip and problem."""
+
+    def __init__(self, path: str | os.PathLike, problem: str, clip: str | None = None):
+        self.path = str(path)
+        self.clip = clip
+        self.problem = " ".join(str(problem).split())
+        where = f"{self.path}: clip {clip}: " if clip else f"{self.path}: "
+        super().__init__(where + self.problem)
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """One recorded clip at its own frame rate, as stored in the file."""
+
+    user: str
+    clip_id: str
+    group: str
+    split: str
+    active_dims: np.ndarray  # int, indices into DIMENSIONS
+    fps: float
+    keypoints: np.ndarray  # (N, 21, 3) float32, metres, user frame; NaN frame = hand lost
+    object_velocity: np.ndarray | None = None  # (N, 6) float32, m/s and rad/s, user frame
+    object_pose: np.ndarray | None = None  # (N, 7) float32, [x y z qw qx qy qz]
+    timestamps: np.ndarray | None = None  # (N,) float64, seconds
+    description: str = ""
+
+    @property
+    def name(self) -> str:
+        return f"{self.user}/{self.clip_id}"
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.keypoints.shape[0])
+
+    @property
+    def times(self) -> np.ndarray:
+        return frame_times(self.num_frames, self.fps, self.timestamps)
+
+
+@dataclass(frozen=True, eq=False)
+class PolicyClip:
+    """A clip at the policy rate: features, validity and labels on the same sample times."""
+
+    user: str
+    clip_id: str
+    group: str
+    split: str
+    active_dims: np.ndarray  # int
+    features: np.ndarray  # (T, 36) float32
+    valid: np.ndarray  # (T,) bool
+    labels: np.ndarray | None  # (T, 6) float32, or None for an unlabelled stream
+    rate_hz: float = 10.0
+
+    @property
+    def name(self) -> str:
+        return f"{self.user}/{self.clip_id}"
+
+    def __len__(self) -> int:
+        return int(self.features.shape[0])
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_dataset(path: str | os.PathLike, clips: Iterable[Clip], generator: str | None = None) -> None:
+    """Write clips to ``path`` atomically (a temporary file in the same folder, then a rename).
+
+    ``generator`` (optional) is stored as the root attribute ``generator``.
+    """
+    import h5py
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = FORMAT
+            f.attrs["version"] = VERSION
+            if generator is not None:
+                f.attrs["generator"] = generator
+            users = f.create_group("users")
+            for clip in clips:
+                _check_clip_for_writing(path, clip)
+                if clip.user not in users:
+                    g = users.create_group(clip.user)
+                    g.attrs["group"] = clip.group
+                    g.create_group("clips")
+                ug = users[clip.user]
+                if ug.attrs["group"] != clip.group:
+                    raise DatasetError(path, f"user is both {ug.attrs['group']} and {clip.group}", clip.name)
+                cg = ug["clips"].create_group(clip.clip_id)
+                cg.attrs["fps"] = float(clip.fps)
+                cg.attrs["active_dims"] = np.asarray(clip.active_dims, dtype=np.int64).reshape(-1)
+                cg.attrs["split"] = clip.split
+                if clip.description:
+                    cg.attrs["description"] = clip.description
+                cg.create_dataset("keypoints", data=np.asarray(clip.keypoints, dtype=np.float32))
+                if clip.object_velocity is not None:
+                    cg.create_dataset("object_velocity", data=np.asarray(clip.object_velocity, dtype=np.float32))
+                if clip.object_pose is not None:
+                    cg.create_dataset("object_pose", data=np.asarray(clip.object_pose, dtype=np.float32))
+                if clip.timestamps is not None:
+                    cg.create_dataset("timestamps", data=np.asarray(clip.timestamps, dtype=np.float64))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; give it the usual mode
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def _check_clip_for_writing(path: Path, clip: Clip) -> None:
+    problem = _clip_problem(
+        clip.group, clip.split, clip.fps, np.asarray(clip.active_dims), np.asarray(clip.keypoints),
+        clip.object_velocity, clip.object_pose, clip.timestamps,
+    )
+    if problem:
+        raise DatasetError(path, problem, clip.name)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _text(value) -> str:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray) and value.shape == ():
+        return _text(value.item())
+    return str(value)
+
+
+def _clip_problem(group, split, fps, active_dims, keypoints, velocity, pose, timestamps) -> str | None:
+    """The first contract problem of a clip's content, or None."""
+    if group not in GROUPS:
+        return f"user group must be one of {', '.join(GROUPS)}, got {group!r}"
+    if split not in SPLITS:
+        return f"split must be one of {', '.join(SPLITS)}, got {split!r}"
+    try:
+        fps = float(fps)
+    except (TypeError, ValueError):
+        return f"fps must be a number, got {fps!r}"
+    if not np.isfinite(fps) or fps < MIN_FPS:
+        return f"fps must be a finite number >= {MIN_FPS:g}, got {fps!r}"
+    if not np.issubdtype(active_dims.dtype, np.integer) or active_dims.ndim != 1:
+        return f"active_dims must be a 1-D int array, got {active_dims.dtype} shape {active_dims.shape}"
+    if active_dims.size and (active_dims.min() < 0 or active_dims.max() > 5):
+        return f"active_dims must index [Tx, Ty, Tz, Rx, Ry, Rz] (0..5), got {active_dims.tolist()}"
+    if np.unique(active_dims).size != active_dims.size:
+        return f"active_dims has repeated entries: {active_dims.tolist()}"
+    if not np.issubdtype(keypoints.dtype, np.floating):
+        return f"keypoints must be float32, got {keypoints.dtype}"
+    if keypoints.ndim != 3 or keypoints.shape[1:] != (21, 3) or keypoints.shape[0] < 1:
+        return f"keypoints must have shape (N, 21, 3) with N >= 1, got {keypoints.shape}"
+    n = keypoints.shape[0]
+    if np.isinf(keypoints).any():
+        return "keypoints hold infinite values"
+    seen = np.isfinite(keypoints).all(axis=(1, 2))
+    partial = ~seen & ~np.isnan(keypoints).all(axis=(1, 2))
+    if partial.any():
+        return f"keypoints frame {int(np.flatnonzero(partial)[0])} is partly NaN (a lost hand is an all-NaN frame)"
+    for name, arr, width in (("object_velocity", velocity, 6), ("object_pose", pose, 7)):
+        if arr is None:
+            continue
+        arr = np.asarray(arr)
+        if not np.issubdtype(arr.dtype, np.floating):
+            return f"{name} must be float32, got {arr.dtype}"
+        if arr.shape != (n, width):
+            return f"{name} must have shape ({n}, {width}), got {arr.shape}"
+        if not np.isfinite(arr).all():
+            return f"{name} holds non-finite values"
+    if timestamps is not None:
+        ts = np.asarray(timestamps)
+        if not np.issubdtype(ts.dtype, np.floating):
+            return f"timestamps must be float64, got {ts.dtype}"
+        if ts.shape != (n,):
+            return f"timestamps must have shape ({n},), got {ts.shape}"
+        if not np.isfinite(ts).all():
+            return "timestamps hold non-finite values"
+        if n > 1 and not (np.diff(ts) > 0).all():
+            return "timestamps must increase strictly"
+    return None
+
+
+def read_dataset(path: str | os.PathLike) -> list[Clip]:
+    """All clips of a dataset file, validated against contracts §1, in user then clip name order.
+
+    Raises :class:`DatasetError` (one line: file, clip, problem) for any breach:
+    unreadable or truncated file, unknown format/version, missing group or
+    attribute, wrong shape or dtype, non-finite label.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise DatasetError(path, "no such file")
+    if path.is_dir():
+        raise DatasetError(path, "is a folder, not a dataset file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise DatasetError(path, f"cannot be read as HDF5 (truncated or not a dataset file): {err}") from None
+    try:
+        with f:
+            return _read_open_file(path, f)
+    except DatasetError:
+        raise
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError) as err:
+        # h5py raises these for damaged objects inside a file that opened.
+        raise DatasetError(path, f"damaged file: {type(err).__name__}: {err}") from None
+
+
+def _read_open_file(path: Path, f) -> list[Clip]:
+    import h5py
+
+    fmt = _text(f.attrs["format"]) if "format" in f.attrs else None
+    if fmt is None:
+        raise DatasetError(path, "missing root attribute 'format'")
+    if fmt != FORMAT:
+        raise DatasetError(path, f"unknown format {fmt!r} (expected {FORMAT!r})")
+    if "version" not in f.attrs:
+        raise DatasetError(path, "missing root attribute 'version'")
+    try:
+        version = int(np.asarray(f.attrs["version"]).reshape(-1)[0])
+    except (TypeError, ValueError, IndexError):
+        raise DatasetError(path, f"version must be an integer, got {f.attrs['version']!r}") from None
+    if version != VERSION:
+        raise DatasetError(path, f"unknown version {version} (expected {VERSION})")
+    if "users" not in f or not isinstance(f["users"], h5py.Group):
+        raise DatasetError(path, "missing group '/users'")
+    clips: list[Clip] = []
+    for user in sorted(f["users"].keys()):
+        ug = f["users"][user]
+        if not isinstance(ug, h5py.Group):
+            raise DatasetError(path, f"/users/{user} is not a group")
+        if "group" not in ug.attrs:
+            raise DatasetError(path, f"user {user}: missing attribute 'group'")
+        group = _text(ug.attrs["group"])
+        if group not in GROUPS:
+            raise DatasetError(path, f"user {user}: group must be one of {', '.join(GROUPS)}, got {group!r}")
+        if "clips" not in ug or not isinstance(ug["clips"], h5py.Group):
+            raise DatasetError(path, f"user {user}: missing group 'clips'")
+        for clip_id in sorted(ug["clips"].keys()):
+            clips.append(_read_clip(path, user, group, clip_id, ug["clips"][clip_id]))
+    return clips
+
+
+def _read_clip(path: Path, user: str, group: str, clip_id: str, cg) -> Clip:
+    import h5py
+
+    name = f"{user}/{clip_id}"
+    if not isinstance(cg, h5py.Group):
+        raise DatasetError(path, "is not a group", name)
+    for attr in ("fps", "active_dims", "split"):
+        if attr not in cg.attrs:
+            raise DatasetError(path, f"missing attribute '{attr}'", name)
+    if "keypoints" not in cg:
+        raise DatasetError(path, "missing dataset 'keypoints'", name)
+
+    def dataset(key):
+        if key not in cg:
+            return None
+        obj = cg[key]
+        if not isinstance(obj, h5py.Dataset):
+            raise DatasetError(path, f"'{key}' is not a dataset", name)
+        try:
+            return obj[()]
+        except (OSError, RuntimeError, ValueError) as err:
+            raise DatasetError(path, f"cannot read '{key}' (damaged file?): {err}", name) from None
+
+    fps_raw = np.asarray(cg.attrs["fps"])
+    if fps_raw.size != 1 or not np.issubdtype(fps_raw.dtype, np.number):
+        raise DatasetError(path, f"fps must be a number, got {cg.attrs['fps']!r}", name)
+    fps = float(fps_raw.reshape(-1)[0])
+    active = np.asarray(cg.attrs["active_dims"])
+    if active.ndim == 0:
+        active = active.reshape(1)
+    if active.size == 0:
+        active = np.zeros(0, dtype=np.int64)
+    split = _text(cg.attrs["split"])
+    keypoints = dataset("keypoints")
+    velocity = dataset("object_velocity")
+    pose = dataset("object_pose")
+    timestamps = dataset("timestamps")
+    problem = _clip_problem(group, split, fps, active, np.asarray(keypoints), velocity, pose, timestamps)
+    if problem:
+        raise DatasetError(path, problem, name)
+    return Clip(
+        user=user,
+        clip_id=clip_id,
+        group=group,
+        split=split,
+        active_dims=active.astype(np.int64),
+        fps=fps,
+        keypoints=np.asarray(keypoints, dtype=np.float32),
+        object_velocity=None if velocity is None else np.asarray(velocity, dtype=np.float32),
+        object_pose=None if pose is None else np.asarray(pose, dtype=np.float32),
+        timestamps=None if timestamps is None else np.asarray(timestamps, dtype=np.float64),
+        description=_text(cg.attrs["description"]) if "description" in cg.attrs else "",
+    )
+
+
+# --------------------------------------------------------------------------- policy rate
+
+
+def to_policy_clip(clip: Clip, rate_hz: float = 10.0) -> PolicyClip:
+    """Features and labels of a clip at the policy rate, on the same sample times."""
+    features, valid = hand_features(clip.keypoints, clip.fps, rate_hz, clip.timestamps)
+    labels = None
+    if clip.object_velocity is not None:
+        labels, _ = resample(clip.object_velocity.astype(np.float64), clip.times, rate_hz)
+        labels = labels.astype(np.float32)
+    return PolicyClip(
+        user=clip.user,
+        clip_id=clip.clip_id,
+        group=clip.group,
+        split=clip.split,
+        active_dims=clip.active_dims,
+        features=features,
+        valid=valid,
+        labels=labels,
+        rate_hz=float(rate_hz),
+    )
+
+
+def load_policy_clips(path: str | os.PathLike, rate_hz: float = 10.0) -> list[PolicyClip]:
+    """Read and validate a dataset file, then convert every clip to the policy rate."""
+    return [to_policy_clip(c, rate_hz) for c in read_dataset(path)]
+
+
+def find_clips(clips: Iterable, spec: str) -> list:
+    """Clips named by ``USER/CLIP`` (one clip) or ``USER`` (all of that user's clips)."""
+    clips = list(clips)
+    if "/" in spec:
+        user, clip_id = spec.split("/", 1)
+        return [c for c in clips if c.user == user and c.clip_id == clip_id]
+    return [c for c in clips if c.user == spec]

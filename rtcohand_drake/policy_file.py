@@ -1,0 +1,46 @@
+"""Loading an exported policy file (TorchScript, contracts §5), with one-line errors.
+
+Kept apart from the training code: the Drake systems load the exported file
+through this module and never import the model classes.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import zipfile
+
+from rtcohand_drake.errors import InputError
+
+REQUIRED = ("encode_context", "step", "feature_dim", "hidden_size", "latent_dim")
+
+
+class PolicyFileError(InputError):
+    """A policy file that cannot be used; one line naming the file and the problem."""
+
+
+def load_policy(path: os.PathLike):
+    """Loads an exported policy; a missing, corrupt or wrong file is a PolicyFileError naming it."""
+    import torch
+
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise PolicyFileError(f"{path}: no such policy file")
+    if not zipfile.is_zipfile(path):
+        raise PolicyFileError(f"{path}: not a TorchScript policy (not a PyTorch archive; truncated or corrupt?)")
+    with zipfile.ZipFile(path) as archive:
+        if not any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist()):
+            raise PolicyFileError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
+                                  "python -m rtcohand_drake.export)")
+    try:
+        module = torch.jit.load(str(path), map_location="cpu")
+    except Exception as err:  # torch raises RuntimeError and others for a damaged archive
+        text = str(err).strip().splitlines()
+        raise PolicyFileError(f"{path}: not a TorchScript policy ({type(err).__name__}: "
+                              f"{text[0][:160] if text else ''})") from None
+    for name in REQUIRED:
+        if not hasattr(module, name):
+            raise PolicyFileError(f"{path}: TorchScript module lacks {name!r} (not a CCHP policy export)")
+    if int(module.feature_dim) != 36:
+        raise PolicyFileError(f"{path}: policy reads {int(module.feature_dim)} features, the hand features are 36")
+    return module
