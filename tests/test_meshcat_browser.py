@@ -1,0 +1,53 @@
+"""A real browser (headless Chromium) loads Meshcat during a run and sees the robot."""
+
+import subprocess
+import tempfile
+import threading
+import time
+
+import numpy as np
+import pytest
+from PIL import Image
+from pydrake.geometry import Meshcat, MeshcatParams
+from pydrake.systems.analysis import Simulator
+
+from rtcohand_drake.browser import HEADLESS_FLAGS, find_chromium, screenshot
+from rtcohand_drake.diagram import build_run_diagram
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.station import GEN3_LINKS
+
+
+def test_meshcat_page_shows_the_gen3_during_a_run(tmp_path):
+    chromium = find_chromium()
+    meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
+    run = build_run_diagram(load_scenario("inspection"), meshcat=meshcat)
+    simulator = Simulator(run.diagram)
+    simulator.set_target_realtime_rate(1.0)
+    simulator.Initialize()
+    errors = []
+
+    def advance():
+        try:
+            simulator.AdvanceTo(12.0)
+        except Exception as err:  # surfaced below
+            errors.append(err)
+
+    worker = threading.Thread(target=advance, daemon=True)
+    worker.start()
+    time.sleep(1.0)  # the run is under way when the page loads
+    with tempfile.TemporaryDirectory() as profile:
+        dom = subprocess.run([chromium, *HEADLESS_FLAGS, f"--user-data-dir={profile}",
+                              "--virtual-time-budget=8000", "--dump-dom", meshcat.web_url()],
+                             capture_output=True, text=True, timeout=120).stdout
+    png = screenshot(meshcat.web_url(), tmp_path / "meshcat.png", 800, 600)
+    assert worker.is_alive() or not errors, errors  # still running (or finished cleanly)
+    worker.join(timeout=30)
+    assert not errors, errors
+
+    # The scene tree in the page lists every Gen3 link that has geometry (end_effector_link is a bare frame).
+    missing = [link for link in GEN3_LINKS if link != "end_effector_link" and link not in dom]
+    assert not missing, f"links missing from the page's scene tree: {missing}"
+    # The screenshot is a rendered scene, not a blank page.
+    pixels = np.asarray(Image.open(png).convert("L"), dtype=float)
+    assert pixels.std() > 10.0
+    assert len(np.unique(pixels.astype(np.uint8))) > 50
