@@ -67,12 +67,15 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     connect(operator.GetOutputPort("operator"), supervisor.GetInputPort("operator"))
     connect(source.GetOutputPort("gesture_status"), supervisor.GetInputPort("gesture_status"))
     connect(station.GetOutputPort("workpiece.pose"), supervisor.GetInputPort("workpiece.pose"))
+    if source.HasInputPort("workpiece.pose"):  # a closed-loop source (the simulated operator) watches the part
+        connect(station.GetOutputPort("workpiece.pose"), source.GetInputPort("workpiece.pose"))
     command_filter = None
     if policy is not None:
         policy = builder.AddNamedSystem("cchp_policy", policy)
         command_filter = builder.AddNamedSystem(
             "moving_average", MovingAverageDownsampler(scenario.command_filter, 1.0 / scenario.policy.rate_hz))
         connect(source.GetOutputPort("gesture_features"), policy.GetInputPort("gesture_features"))
+        connect(source.GetOutputPort("gesture_features"), supervisor.GetInputPort("gesture_features"))
         connect(supervisor.GetOutputPort("resume_count"), policy.GetInputPort("resume_count"))
         connect(supervisor.GetOutputPort("resume_count"), command_filter.GetInputPort("resume_count"))
         connect(policy.GetOutputPort("policy_mean"), command_filter.GetInputPort("policy_mean"))

@@ -6,6 +6,7 @@
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
         [--context-file PATH.h5 [--context-user USER]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
+        [--hardware --robot-ip IP [--dry-run]]                  # the real arm (kortex_station)
 
 Prints the Meshcat URL (unless --no-meshcat), then a summary: faces
 inspected, completion time, peak workpiece speeds and safety events. Bad input
@@ -53,6 +54,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--log", type=Path, default=None, help="write the run log (HDF5, contracts §2)")
     p.add_argument("--html", type=Path, default=None,
                    help="save the Meshcat animation as a standalone HTML file (default: beside --log)")
+    p.add_argument("--hardware", action="store_true", help="drive the real arm (Kortex API) instead of the simulation")
+    p.add_argument("--robot-ip", default=None, help="the arm's address (with --hardware)")
+    p.add_argument("--dry-run", action="store_true", help="with --hardware: connect and show the arm, send no motion")
     return p
 
 
@@ -72,6 +76,10 @@ def _check_args(args) -> None:
         raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
     if args.context_user is not None and args.context_file is None:
         raise InputError("command line: --context-user goes with --context-file")
+    if args.hardware and not args.robot_ip:
+        raise InputError("command line: --hardware needs --robot-ip IP (the arm's address)")
+    if not args.hardware and (args.robot_ip is not None or args.dry_run):
+        raise InputError("command line: --robot-ip and --dry-run go with --hardware")
 
 
 def _resolve_model(args, scenario) -> Path:
@@ -122,11 +130,11 @@ def _replay_source(args, scenario):
     return source, users, {c.name for c in clips}
 
 
-def _build(args, scenario, meshcat):
+def _build(args, scenario, meshcat, station=None):
     from rtcohand_drake.diagram import build_run_diagram
 
     if args.gesture_source == "scripted":
-        return build_run_diagram(scenario, meshcat=meshcat, gesture_source="scripted"), None
+        return build_run_diagram(scenario, meshcat=meshcat, station=station, gesture_source="scripted"), None
     from rtcohand_drake.policy_system import CchpPolicy
 
     model = _resolve_model(args, scenario)
@@ -152,7 +160,7 @@ def _build(args, scenario, meshcat):
         raise InputError("command line: --gesture-source camera needs a live hand tracker "
                          "(pip install -e '.[camera]'); none is connected in this build")
     policy = CchpPolicy(model, pieces, rate, seed=args.seed)
-    return build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat,
+    return build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), end_time
 
 
@@ -179,9 +187,19 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
         print(f"Meshcat: {meshcat.web_url()}", flush=True)
-    run, end_time = _build(args, scenario, meshcat)
+    station = None
+    if args.hardware:  # the session stops the arm at exit even if a step below fails (kortex_station)
+        from rtcohand_drake.kortex_station import make_kortex_station
+
+        station = make_kortex_station(scenario, args.robot_ip, dry_run=args.dry_run)
+    try:
+        run, end_time = _build(args, scenario, meshcat, station)
+    except BaseException:
+        if station is not None:
+            station.close()
+        raise
     duration = args.duration if args.duration is not None else (end_time or scenario.duration_s)
-    rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if meshcat else 0.0)
+    rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if meshcat or station is not None else 0.0)
 
     simulator = Simulator(run.diagram)
     simulator.set_target_realtime_rate(rate)
@@ -190,23 +208,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     simulator.Initialize()
     wall_start = time.perf_counter()
     interrupted = False
+    fault = None
     try:
         simulator.AdvanceTo(duration)
     except KeyboardInterrupt:
         interrupted = True
         print("interrupted: stopping the run and writing what was recorded", file=sys.stderr)
+    except InputError as err:  # a hardware fault: the arm is stopped below, the log written, then exit 2
+        fault = err
+    finally:
+        if station is not None:
+            station.close()  # Stop(), then close the session, on every exit path
     wall = time.perf_counter() - wall_start
     root = simulator.get_context()
     sim_time = root.get_time()
 
     log = collect_run_log(run, root, scenario)
+    if station is not None:
+        log.events = sorted(log.events + station.events, key=lambda e: e.time)
     result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
     log.completed, log.faces_inspected, log.completion_time = (
         result.completed, result.faces_inspected, result.completion_time)
     log.extra_attrs.update(seed=args.seed, sim_duration_s=sim_time, interrupted=interrupted,
                            filter_mode=scenario.command_filter.mode)
+    if fault is not None:
+        log.add_event(sim_time, "fault", str(fault))
+        log.completed = False
     if args.log is not None:
         write_run_log(args.log, log)
+    if fault is not None:
+        raise fault
     html = args.html or (args.log.with_suffix(".html") if args.log is not None else None)
     if run.visualizer is not None:
         run.visualizer.StopRecording()

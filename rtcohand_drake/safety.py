@@ -2,9 +2,11 @@
 
 Every `period_s` it turns the filtered twist request into the twist command:
 
-1. watchdog: a gesture flagged invalid, or older than `stale_after_s`, or a
-   non-finite request, sets the target to zero, and the command decays to
-   zero within one command period (linearly, from where it was);
+1. watchdog: a gesture flagged invalid, older than `stale_after_s`, with a
+   non-finite or physically implausible feature (a hand part faster than
+   `max_plausible_feature`), or a non-finite request, sets the target to zero,
+   and the command decays to zero within one command period (linearly, from
+   where it was);
 2. pause: the operator's pause brings the workpiece to rest over
    `pause_ramp_s` and holds it; resume counts up `resume_count` (the policy
    resamples its latent z and the filter forgets its history on a change);
@@ -22,6 +24,7 @@ Every `period_s` it turns the filtered twist request into the twist command:
 Input ports
   twist_request   (6) [vx vy vz wx wy wz], user frame (from the filter)
   gesture_status  (2) [valid (0/1), time of the gesture frame (s)]
+  gesture_features (36) optional: the features the policy reads, checked for sanity
   workpiece.pose  (7) [x y z qw qx qy qz], world
   operator        (2) [pause (0/1), sensitivity factor]
 Output ports
@@ -66,6 +69,12 @@ def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarra
     return v_W - along * normal_W if along > 0 else v_W
 
 
+def plausible_features(x: np.ndarray, config: Safety) -> bool:
+    """Finite, and no hand part moving faster than a hand can (m/s or rad/s)."""
+    x = np.asarray(x, float)
+    return bool(np.all(np.isfinite(x)) and np.max(np.abs(x), initial=0.0) <= config.max_plausible_feature)
+
+
 class SafetySupervisor(LeafSystem):
     def __init__(self, config: Safety, workspace: Box, R_WU: np.ndarray, eye_W: np.ndarray,
                  command_period_s: float):
@@ -80,6 +89,7 @@ class SafetySupervisor(LeafSystem):
         self._watchdog_ramp_s = min(command_period_s, config.pause_ramp_s)
         self._request = self.DeclareVectorInputPort("twist_request", 6)
         self._gesture = self.DeclareVectorInputPort("gesture_status", 2)
+        self._features = self.DeclareVectorInputPort("gesture_features", 36)
         self._pose = self.DeclareVectorInputPort("workpiece.pose", 7)
         self._operator = self.DeclareVectorInputPort("operator", 2)
         self._command = self.DeclareDiscreteState(np.zeros(6))
@@ -143,6 +153,9 @@ class SafetySupervisor(LeafSystem):
             acted |= Intervention.NON_FINITE
         stale = (valid < 0.5) or not np.isfinite(frame_time) or (t - frame_time > cfg.stale_after_s) \
             or bool(acted & Intervention.NON_FINITE)
+        if self._features.HasValue(context) and not plausible_features(self._features.Eval(context), cfg):
+            stale = True
+            acted |= Intervention.NON_FINITE
 
         if paused:
             new_mode, ramp_s = Mode.PAUSED, cfg.pause_ramp_s
@@ -154,7 +167,7 @@ class SafetySupervisor(LeafSystem):
             new_mode, ramp_s = Mode.RUNNING, None
 
         if ramp_s is not None:
-            if new_mode != mode:  # remember where the ramp to zero starts
+            if mode == Mode.RUNNING:  # a ramp to zero starts here; a pause <-> watchdog switch keeps it
                 ramp_v, ramp_w = np.linalg.norm(command[:3]), np.linalg.norm(command[3:])
             command = self._ramp_to_zero(command, ramp_v, ramp_w, ramp_s)
         else:

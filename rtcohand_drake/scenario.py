@@ -155,6 +155,9 @@ class Safety:
     pause_ramp_s: float = 0.5
     # A gesture older than this (s), or flagged invalid, trips the watchdog.
     stale_after_s: float = 0.3
+    # So does a hand-part velocity above this (m/s or rad/s): no hand moves that fast, so it
+    # is a tracking error (a fast hand moves at about 2-5 m/s, a wrist turns at up to ~15 rad/s).
+    max_plausible_feature: float = 25.0
     # Minimum distance from the workpiece centre to the inspector's eye point (m).
     min_inspector_distance_m: float = 0.55
     # Look-ahead for the workspace and inspector-zone checks (s).
@@ -272,6 +275,7 @@ def _check_values(s: Scenario, source: str) -> None:
     need(sa.max_angular_speed_rad_s > 0, "safety.max_angular_speed_rad_s must be > 0")
     need(0 < sa.sensitivity_min <= sa.sensitivity_default <= sa.sensitivity_max,
          "safety: need 0 < sensitivity_min <= sensitivity_default <= sensitivity_max")
+    need(sa.max_plausible_feature > 0, "safety.max_plausible_feature must be > 0")
     need(sa.pause_ramp_s > 0 and sa.stale_after_s > 0 and sa.lookahead_s >= 0,
          "safety: pause_ramp_s and stale_after_s must be > 0, lookahead_s >= 0")
     need(sa.max_linear_accel_m_s2 > 0 and sa.max_angular_accel_rad_s2 > 0,
