@@ -22,6 +22,8 @@ Output ports
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
@@ -46,13 +48,16 @@ def pack_context(pieces, dtype=np.float32):
 
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0):
+        """`model_path`: an exported policy file, or a module already loaded by `load_policy`."""
         super().__init__()
         import torch
 
         torch.set_num_threads(1)  # one cheap step per period; do not compete with the simulator
         self._torch = torch
-        self.module = load_policy(model_path)
-        self.model_path = str(model_path)
+        if isinstance(model_path, (str, os.PathLike)):
+            self.module, self.model_path = load_policy(model_path), str(model_path)
+        else:  # an already loaded policy module
+            self.module, self.model_path = model_path, getattr(model_path, "source_path", "")
         x_c, y_c, mask = pack_context(context_pieces)
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(

@@ -137,7 +137,11 @@ def _build(args, scenario, meshcat, station=None):
         return build_run_diagram(scenario, meshcat=meshcat, station=station, gesture_source="scripted"), None
     from rtcohand_drake.policy_system import CchpPolicy
 
-    model = _resolve_model(args, scenario)
+    from rtcohand_drake.policy_file import load_policy
+
+    model_path = _resolve_model(args, scenario)
+    model = load_policy(model_path)  # a bad model file fails before anything else is built
+    model.source_path = str(model_path)
     rate = scenario.policy.rate_hz
     end_time = None
     if args.gesture_source == "replay":

@@ -401,6 +401,129 @@ def _saturate(x: np.ndarray, limit: float) -> np.ndarray:
     return np.where(over > 0.0, np.sign(x) * bent, x)
 
 
+# --------------------------------------------------------------------------- gestures to hand motion
+
+THUMB_REST_RAD = np.deg2rad([40.0, 20.0, 15.0, 10.0])  # thumb (azimuth, elevation, MCP, IP), relaxed
+THUMB_CURLED_RAD = np.deg2rad([25.0, 45.0, 50.0, 40.0])  # tucked in, with the fingers curled or pointing
+
+
+def gesture_envelope(t: np.ndarray, on: float, ramp_up: float, off: float, ramp_down: float) -> np.ndarray:
+    """A gesture's activation at times ``t``: smooth ramp up from ``on``, down from ``off`` (``np.inf``: not yet)."""
+    return _envelope(t, on, ramp_up, off, ramp_down)
+
+
+def stroke_profile(user: UserProfile, envelope: np.ndarray, t: np.ndarray, phase0: float) -> np.ndarray:
+    """Speed profile of a move or turn (relative to full speed): steady, or the user's repeated strokes."""
+    if user.repeated:
+        return envelope * (1.0 + user.stroke_amplitude * _stroke(2 * np.pi * user.stroke_freq_hz * t + phase0))
+    return envelope
+
+
+def relaxed_curl(user: UserProfile) -> np.ndarray:
+    """Curl levels (4,) of index..pinky in the user's reference gesture (relaxed, slightly curled)."""
+    return user.relaxed_curl + np.array([0.0, 0.02, 0.04, 0.07])
+
+
+def hand_articulation(
+    config: GeneratorConfig,
+    user: UserProfile,
+    motions: tuple[tuple[int, int], ...],
+    envelopes: list[np.ndarray],
+    drifts: list[np.ndarray],
+    speeds: list[float],
+    rates: list[float],
+    t: np.ndarray,
+    intensity: float,
+    phase0: float,
+    onset_s: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[tuple[int, np.ndarray]]]:
+    """The user's gestures for ``motions`` as finger joints and wrist motion at times ``t`` (N,).
+
+    Per motion k: ``envelopes[k]`` (N,) its activation (0 rest .. 1 full), ``drifts[k]``
+    (N,) seconds of full-speed motion so far, ``speeds[k]`` (m/s) and ``rates[k]``
+    (rad/s) its hand speed and wrist rate. ``phase0`` (rad) is the phase of the
+    strokes and sweeps; ``onset_s`` when the gesture starts (an uncurl first closes
+    the hand from there). Every output is pointwise in time given these inputs.
+
+    Returns curl (N, 4), abduction (N, 4) rad, thumb (N, 4) rad (see
+    :func:`hand_keypoints_local`), translation (N, 3) m of the wrist in U, and the
+    wrist turns [(axis of U, angle (N,) rad)].
+    """
+    N = t.size
+    a_max = np.max(envelopes, axis=0)
+    # Finger posture: relaxed at rest, the user's posture while gesturing.
+    relaxed = relaxed_curl(user)
+    posture = 0.75 if user.curled_posture else 0.02
+    curl = relaxed[None, :] + (posture - relaxed)[None, :] * a_max[:, None]
+    abduction = np.zeros((N, 4))
+    thumb_rest = THUMB_REST_RAD
+    thumb_curled = THUMB_CURLED_RAD
+    thumb_pose = thumb_rest + (thumb_curled - thumb_rest) * (a_max[:, None] if user.curled_posture else np.zeros((N, 1)))
+
+    translation = np.zeros((N, 3))
+    turn_angles: list[tuple[int, np.ndarray]] = []
+    for k, (dim, sign) in enumerate(motions):
+        g = user.gestures[(dim, sign)]
+        a = envelopes[k]
+        drift, speed, rate = drifts[k], speeds[k], rates[k]
+        if g.kind in ("move", "point"):
+            translation[:, g.axis] += g.sign * _saturate(speed * drift, config.max_excursion_m)
+            if g.kind == "point":
+                point = np.array([0.0, 0.95, 0.95, 0.95])
+                curl = curl + (point - curl) * a[:, None]
+                thumb_pose = thumb_pose + (thumb_curled - thumb_pose) * a[:, None]
+        elif g.kind in ("turn", "turn_move"):
+            theta = g.sign * _saturate(rate * drift, config.max_turn_rad)
+            turn_angles.append((g.axis, theta))
+            if g.kind == "turn_move":
+                translation[:, g.move_axis] += g.sign * _saturate(
+                    0.7 * speed * drift, config.max_excursion_m
+                )
+        elif g.kind == "sweep":
+            phase = 2 * np.pi * user.sweep_freq_hz * np.sqrt(intensity) * t + phase0
+            wave = g.sign * a * _sawtooth(phase) * user.sweep_amplitude[g.pattern] * min(intensity, 1.3)
+            if g.pattern == "flex":
+                curl = curl + (0.25 - curl) * a[:, None] + wave[:, None]
+            elif g.pattern == "spread":
+                abduction = abduction + wave[:, None]
+            else:
+                thumb_pose = thumb_pose + np.stack([wave, 0.3 * wave, 0.5 * np.abs(wave), 0.8 * np.abs(wave)], -1)
+        elif g.kind == "curl":
+            prog = user.curl_rate_per_s * intensity * drift
+            if g.sign > 0:
+                curl = curl + (0.05 - curl) * a[:, None] + prog[:, None]
+            else:
+                pre = _smoothstep((t - onset_s) / 0.3)
+                curl = curl + (0.95 - curl) * pre[:, None] - prog[:, None]
+
+    thumb_pose = np.clip(thumb_pose, np.deg2rad([0.0, 0.0, 0.0, -10.0]), np.deg2rad([80.0, 60.0, 60.0, 80.0]))
+    return curl, abduction, thumb_pose, translation, turn_angles
+
+
+def rest_rotation(user: UserProfile) -> np.ndarray:
+    """Orientation (3, 3) of the hand frame H in U in the user's reference gesture."""
+    return rotation_matrices(np.array([[0.0, 0.0, user.rest_yaw]]))[0]
+
+
+def hand_pivot(user: UserProfile) -> np.ndarray:
+    """Point (3,) of H the wrist turns about: the palm centre, or the elbow behind the wrist."""
+    return PALM_CENTRE * user.hand_scale if user.elbow_offset_m == 0.0 else np.array([0.0, -user.elbow_offset_m, 0.0])
+
+
+def place_hand(user: UserProfile, local: np.ndarray, R: np.ndarray, *offsets: np.ndarray) -> np.ndarray:
+    """Keypoints (N, 21, 3) in U of a hand posed as ``local`` (N, 21, 3) in H and turned to ``R`` (N, 3, 3).
+
+    The turn is about :func:`hand_pivot`; the wrist starts at the user's rest
+    position and is displaced by each of ``offsets`` ((N, 3) m, added in order).
+    """
+    wrist = user.rest_position
+    for offset in offsets:
+        wrist = wrist + offset
+    pivot = hand_pivot(user)
+    wrist = wrist + (rest_rotation(user) @ pivot) - R @ pivot
+    return wrist[:, None, :] + np.einsum("nij,nkj->nki", R, local)
+
+
 # --------------------------------------------------------------------------- one clip
 
 
@@ -437,66 +560,23 @@ def simulate_clip(
         envs.append(_envelope(t, max(on + shift, 0.2), up, off + shift, down))
     a_max = np.max(envs, axis=0)
 
-    # Finger posture: relaxed at rest, the user's posture while gesturing.
-    relaxed = user.relaxed_curl + np.array([0.0, 0.02, 0.04, 0.07])
-    posture = 0.75 if user.curled_posture else 0.02
-    curl = relaxed[None, :] + (posture - relaxed)[None, :] * a_max[:, None]
-    abduction = np.zeros((N, 4))
-    thumb_rest = np.deg2rad([40.0, 20.0, 15.0, 10.0])
-    thumb_curled = np.deg2rad([25.0, 45.0, 50.0, 40.0])
-    thumb_pose = thumb_rest + (thumb_curled - thumb_rest) * (a_max[:, None] if user.curled_posture else np.zeros((N, 1)))
-
-    translation = np.zeros((N, 3))
-    turn_angles: list[tuple[int, np.ndarray]] = []
     phase0 = float(rng.uniform(0, 2 * np.pi))
-    for k, (dim, sign) in enumerate(motions):
-        g = user.gestures[(dim, sign)]
+    drifts, speeds, rates = [], [], []
+    for k in range(len(motions)):
         a = envs[k]
-        if user.repeated:
-            profile = a * (1.0 + user.stroke_amplitude * _stroke(2 * np.pi * user.stroke_freq_hz * t + phase0))
-        else:
-            profile = a
-        drift = np.cumsum(profile) * dt  # seconds of full-speed motion so far
+        drifts.append(np.cumsum(stroke_profile(user, a, t, phase0)) * dt)  # seconds of full-speed motion so far
         # A person paces a steady move or turn to stay within reach over the whole gesture.
         total = max(float(np.sum(a)) * dt, 1e-3)
-        speed = min(user.speed_m_s * intensity, 0.85 * config.max_excursion_m / total)
-        rate = min(user.rate_rad_s * intensity, 0.85 * config.max_turn_rad / total)
-        if g.kind in ("move", "point"):
-            translation[:, g.axis] += g.sign * _saturate(speed * drift, config.max_excursion_m)
-            if g.kind == "point":
-                point = np.array([0.0, 0.95, 0.95, 0.95])
-                curl = curl + (point - curl) * a[:, None]
-                thumb_pose = thumb_pose + (thumb_curled - thumb_pose) * a[:, None]
-        elif g.kind in ("turn", "turn_move"):
-            theta = g.sign * _saturate(rate * drift, config.max_turn_rad)
-            turn_angles.append((g.axis, theta))
-            if g.kind == "turn_move":
-                translation[:, g.move_axis] += g.sign * _saturate(
-                    0.7 * speed * drift, config.max_excursion_m
-                )
-        elif g.kind == "sweep":
-            phase = 2 * np.pi * user.sweep_freq_hz * np.sqrt(intensity) * t + phase0
-            wave = g.sign * a * _sawtooth(phase) * user.sweep_amplitude[g.pattern] * min(intensity, 1.3)
-            if g.pattern == "flex":
-                curl = curl + (0.25 - curl) * a[:, None] + wave[:, None]
-            elif g.pattern == "spread":
-                abduction = abduction + wave[:, None]
-            else:
-                thumb_pose = thumb_pose + np.stack([wave, 0.3 * wave, 0.5 * np.abs(wave), 0.8 * np.abs(wave)], -1)
-        elif g.kind == "curl":
-            prog = user.curl_rate_per_s * intensity * drift
-            if g.sign > 0:
-                curl = curl + (0.05 - curl) * a[:, None] + prog[:, None]
-            else:
-                pre = _smoothstep((t - on) / 0.3)
-                curl = curl + (0.95 - curl) * pre[:, None] - prog[:, None]
+        speeds.append(min(user.speed_m_s * intensity, 0.85 * config.max_excursion_m / total))
+        rates.append(min(user.rate_rad_s * intensity, 0.85 * config.max_turn_rad / total))
+    curl, abduction, thumb_pose, translation, turn_angles = hand_articulation(
+        config, user, motions, envs, drifts, speeds, rates, t, intensity, phase0, on)
 
-    thumb_pose = np.clip(thumb_pose, np.deg2rad([0.0, 0.0, 0.0, -10.0]), np.deg2rad([80.0, 60.0, 60.0, 80.0]))
     local = hand_keypoints_local(curl, abduction, thumb_pose, user.hand_scale)
 
     # Wrist rotation: the turns' angular velocities about axes of U add up (a person
     # turning "about X and about Z" at once), integrated from the rest pose.
-    R_rest = rotation_matrices(np.array([[0.0, 0.0, user.rest_yaw]]))[0]
+    R_rest = rest_rotation(user)
     omega = np.zeros((N, 3))
     for axis, theta in turn_angles:
         omega[:, axis] += np.gradient(theta, dt) if N > 1 else 0.0
@@ -506,12 +586,10 @@ def simulate_clip(
     tremor_rot = user.tremor_rotation_rad * np.sin(2 * np.pi * user.tremor_freq_hz * t[:, None] + tremor_phase[0])
     R = rotation_matrices(tremor_rot) @ R
 
-    # Pivot: turning in place keeps the palm centre still; about the elbow, the elbow.
-    pivot = PALM_CENTRE * user.hand_scale if user.elbow_offset_m == 0.0 else np.array([0.0, -user.elbow_offset_m, 0.0])
+    # Pivot (hand_pivot): turning in place keeps the palm centre still; about the elbow, the elbow.
     wander = config.wander_position_m * np.sin(2 * np.pi * rng.uniform(0.2, 0.5, 3) * t[:, None] + rng.uniform(0, 6.3, 3))
     tremor_pos = user.tremor_position_m * np.sin(2 * np.pi * user.tremor_freq_hz * t[:, None] + tremor_phase[1])
-    wrist = user.rest_position + translation + wander + tremor_pos + (R_rest @ pivot) - R @ pivot
-    clean = wrist[:, None, :] + np.einsum("nij,nkj->nki", R, local)
+    clean = place_hand(user, local, R, translation, wander, tremor_pos)
 
     # Camera: jitter and lost frames.
     keypoints = clean + rng.normal(0.0, config.jitter_m, size=clean.shape)

@@ -1,0 +1,207 @@
+"""Property tests through the whole diagram: whatever the gesture stream, the arm stays safe.
+
+Generated streams (hypothesis) mix normal gestures with NaN/inf frames, huge
+values, frozen frames, dropped frames, sudden jumps, sign flips, long silences,
+and operator pause/resume at random times. Each runs through gesture source ->
+CchpPolicy -> MovingAverageDownsampler -> SafetySupervisor -> diff IK -> the
+simulated Gen3, from a posture with the part lifted into free space.
+
+The number of streams: RTCOHAND_PROPERTY_EXAMPLES (default 1000, within CI's budget);
+the soak runs 10,000 with `RTCOHAND_PROPERTY_EXAMPLES=10000 pytest tests/test_safety_properties.py`.
+"""
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from rtcohand_drake.diagram import build_run_diagram
+from rtcohand_drake.operator_panel import ScriptedOperator
+from rtcohand_drake.policy_system import CchpPolicy
+from rtcohand_drake.safety import Mode, plausible_features
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.station import eye_position
+
+EXAMPLES = int(os.environ.get("RTCOHAND_PROPERTY_EXAMPLES", "1000"))
+DURATION_S = 3.0
+RATE_HZ = 10.0
+KINDS = ("gesture", "nan", "inf", "huge", "frozen", "dropped", "jump", "flip", "silence")
+
+
+class StreamGestureSource(LeafSystem):
+    """Plays a pre-generated stream of (features, valid, frame_time) at the policy rate (test harness)."""
+
+    def __init__(self):
+        super().__init__()
+        self.stream = (np.zeros((1, 36)), np.ones(1), np.zeros(1))
+        self.DeclareVectorOutputPort("gesture_features", 36, self._features)
+        self.DeclareVectorOutputPort("gesture_status", 2, self._status)
+
+    def _k(self, context):
+        return min(int(np.floor(context.get_time() * RATE_HZ + 1e-6)), len(self.stream[0]) - 1)
+
+    def _features(self, context, output: BasicVector):
+        output.SetFromVector(self.stream[0][self._k(context)])
+
+    def _status(self, context, output: BasicVector):
+        k = self._k(context)
+        output.SetFromVector([self.stream[1][k], self.stream[2][k]])
+
+
+class SettableOperator(ScriptedOperator):
+    def set_pauses(self, pauses):
+        self._pauses = list(pauses)
+
+
+def make_stream(segments, seed):
+    """segments: [(kind, n_steps, scale)] -> features (N,36), valid (N,), frame_time (N,)."""
+    rng = np.random.default_rng(seed)
+    feats, valid, times = [], [], []
+    previous = np.zeros(36)
+    k = 0
+    for kind, n, scale in segments:
+        direction = rng.normal(size=36)
+        for i in range(n):
+            t = k / RATE_HZ
+            x, ok, frame_time = previous, 1.0, t
+            if kind == "gesture":
+                x = scale * np.sin(np.pi * (i + 1) / (n + 1)) * direction
+            elif kind == "nan":
+                x = np.where(rng.random(36) < 0.5, np.nan, previous)
+            elif kind == "inf":
+                x = np.where(rng.random(36) < 0.5, np.inf, -np.inf)
+            elif kind == "huge":
+                x = 1e6 * direction
+            elif kind == "frozen":
+                frame_time = times[-1] if times else 0.0  # no new camera frame
+            elif kind == "dropped":
+                x, ok = np.zeros(36), 0.0
+            elif kind == "jump":
+                x = 50 * scale * direction
+            elif kind == "flip":
+                x = -previous
+            elif kind == "silence":
+                x = np.zeros(36)
+            feats.append(x)
+            valid.append(ok)
+            times.append(frame_time)
+            previous = x if np.all(np.isfinite(x)) else previous
+            k += 1
+    n_total = int(DURATION_S * RATE_HZ) + 1
+    while len(feats) < n_total:  # the rest of the run: silence
+        feats.append(np.zeros(36))
+        valid.append(1.0)
+        times.append(len(times) / RATE_HZ)
+    return np.array(feats[:n_total]), np.array(valid[:n_total]), np.array(times[:n_total])
+
+
+@pytest.fixture(scope="module")
+def harness():
+    scenario = load_scenario("inspection")
+    scenario.safety.min_inspector_distance_m = 0.55
+    # Start with the part lifted clear of the mold, in free space (the scripted lift).
+    lift = build_run_diagram(scenario)
+    sim = Simulator(lift.diagram)
+    sim.AdvanceTo(6.0)
+    q_free = lift.station.GetOutputPort("gen3.position_measured").Eval(
+        lift.station.GetMyContextFromRoot(sim.get_context())).copy()
+    scenario.robot.q0_rad = list(q_free)
+    from pathlib import Path
+
+    from rtcohand_drake.model_files import models_dir
+
+    # Any exported policy can be put through the same properties: RTCOHAND_PROPERTY_MODEL=path.pt.
+    model = Path(os.environ.get("RTCOHAND_PROPERTY_MODEL", models_dir() / scenario.policy.model))
+    if not Path(model).is_file():
+        pytest.skip(f"{model} is not built yet")
+    source = StreamGestureSource()
+    operator = SettableOperator()
+    context_rng = np.random.default_rng(0)
+    pieces = [(context_rng.normal(0, 0.2, (40, 36)), context_rng.normal(0, 0.05, (40, 6))) for _ in range(3)]
+    policy = CchpPolicy(model, pieces, RATE_HZ, seed=0)
+    run = build_run_diagram(scenario, source=source, policy=policy, operator=operator, gesture_source="stream")
+    return scenario, run, source, operator
+
+
+segments_strategy = st.lists(
+    st.tuples(st.sampled_from(KINDS), st.integers(1, 12), st.floats(0.01, 3.0)), min_size=1, max_size=8)
+pauses_strategy = st.lists(st.tuples(st.floats(0.0, DURATION_S), st.floats(0.2, 1.5)), max_size=2)
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(segments=segments_strategy, pauses=pauses_strategy, seed=st.integers(0, 2**16))
+def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed):
+    scenario, run, source, operator = harness
+    source.stream = make_stream(segments, seed)
+    pause_windows = [(a, a + d) for a, d in pauses]
+    operator.set_pauses(pause_windows)
+    context = run.diagram.CreateDefaultContext()
+    simulator = Simulator(run.diagram, context)
+    simulator.AdvanceTo(DURATION_S)
+
+    get = lambda name: (run.loggers[name].FindLog(context).sample_times(), run.loggers[name].FindLog(context).data().T)
+    t_cmd, cmd = get("command_twist")
+    _, status = get("safety_status")
+    t_q, q = get("robot_q")
+    _, v = get("robot_v")
+    _, pose = get("robot_workpiece_pose")
+    sa = scenario.safety
+
+    # 1. No command above any limit, never a NaN.
+    assert np.all(np.isfinite(cmd))
+    assert np.all(np.linalg.norm(cmd[:, :3], axis=1) <= sa.max_linear_speed_m_s + 1e-9)
+    assert np.all(np.linalg.norm(cmd[:, 3:], axis=1) <= sa.max_angular_speed_rad_s + 1e-9)
+    # 2. Never a NaN at the station's input; joints within position and velocity limits.
+    ik = run.controller
+    v_cmd = ik.GetOutputPort("gen3.velocity_command").Eval(ik.GetMyContextFromRoot(context))
+    assert np.all(np.isfinite(v_cmd)) and np.all(np.isfinite(q)) and np.all(np.isfinite(v))
+    lower, upper = ik.joint_position_limits
+    margin = scenario.diff_ik.joint_position_margin_rad
+    assert np.all(q >= lower - margin) and np.all(q <= upper + margin)
+    v_hard = ik.control_plant.GetVelocityUpperLimits()
+    assert np.all(np.abs(v) <= v_hard)
+    # 3. The workpiece inside the workspace box and outside the inspector's zone. The supervisor
+    #    stops outward motion 0.1 s ahead; 1 cm covers the arm's deceleration within its limits.
+    lo, hi = np.array(scenario.workspace.min_xyz), np.array(scenario.workspace.max_xyz)
+    p = pose[:, :3]
+    assert np.all(p >= lo - 0.01) and np.all(p <= hi + 0.01)
+    assert np.all(np.linalg.norm(p - eye_position(scenario), axis=1) >= sa.min_inspector_distance_m - 0.01)
+    # 4. A stale or invalid gesture brings the command to zero within one command period.
+    period = scenario.command_filter.command_period_s
+    valid, frame_time = source.stream[1], source.stream[2]
+    bad = np.zeros(len(valid), bool)
+    for k in range(len(valid)):
+        t = k / RATE_HZ
+        bad[k] = valid[k] < 0.5 or (t - frame_time[k] > sa.stale_after_s) \
+            or not plausible_features(source.stream[0][k], sa)
+    for k in range(len(valid)):
+        run_len = 0
+        while k + run_len < len(valid) and bad[k + run_len]:
+            run_len += 1
+        t0 = k / RATE_HZ + (sa.stale_after_s if valid[k] >= 0.5 and plausible_features(source.stream[0][k], sa)
+                            else 0)
+        t_end = (k + run_len) / RATE_HZ
+        if run_len and (k == 0 or not bad[k - 1]) and t_end > t0 + period + 2 * sa.period_s:
+            after = (t_cmd >= t0 + period + sa.period_s) & (t_cmd < t_end)
+            assert np.allclose(cmd[after], 0.0, atol=1e-12), (k, t0, t_end)
+    # 5. A pause holds the arm still: once the ramp is over, joints stop.
+    for a, b in pause_windows:
+        settled = (t_q >= a + sa.pause_ramp_s + 0.3) & (t_q < min(b, DURATION_S))
+        if settled.any():
+            assert np.all(np.abs(v[settled]) < 2e-3), (a, b)
+    # 6. A resume resamples z: the supervisor counts each paused -> running change it sampled,
+    #    and the policy, at its next update, draws the z for that count.
+    samples = np.arange(int(round(DURATION_S / sa.period_s))) * sa.period_s
+    paused = np.array([any(a <= t < b for a, b in pause_windows) for t in samples])
+    count_after = np.concatenate([[0], np.cumsum(paused[:-1] & ~paused[1:])])  # count after each sample
+    assert int(round(status[-1, 1])) == count_after[-1]
+    # The policy's last update (at t_p) read the count from the supervisor updates before t_p.
+    t_p = np.floor((DURATION_S - 1e-9) * RATE_HZ) / RATE_HZ
+    seen = int(count_after[samples < t_p - 1e-9][-1])
+    z = run.policy.GetMyContextFromRoot(context).get_discrete_state(4).get_value()
+    assert np.allclose(z, run.policy.sample_z(seen))
