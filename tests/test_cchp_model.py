@@ -1,0 +1,156 @@
+"""CCHP, RANP and Dummy LSTM on random tensors: shapes, masks, bounds, gradients, checkpoints."""
+
+import numpy as np
+import pytest
+import torch
+
+from rtcohand_drake.model.batching import collate
+from rtcohand_drake.model.blocks import gaussian_kl
+from rtcohand_drake.model.cchp import Cchp, CchpConfig
+from rtcohand_drake.model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rtcohand_drake.model.lstm_baseline import DummyLstm
+from rtcohand_drake.model.ranp import Ranp, RanpConfig
+from rtcohand_drake.train import TrainConfig
+
+SMALL = dict(hidden_size=16, finger_sizes=[6, 8, 8], hand_hidden=[16], hand_feature_size=8,
+             aggregate_sizes=[16, 16], latent_trunk_sizes=[16, 16], latent_dim=4, key_size=8, output_hidden=[16])
+
+
+def _clip(rng, n):
+    return rng.normal(size=(n, 36)).astype(np.float32), rng.normal(size=(n, 6)).astype(np.float32)
+
+
+def _batch(seed=0, b=3):
+    rng = np.random.default_rng(seed)
+    targets = [_clip(rng, int(rng.integers(8, 20))) for _ in range(b)]
+    contexts = [[_clip(rng, int(rng.integers(5, 15))) for _ in range(int(rng.integers(1, 4)))] for _ in range(b)]
+    return targets, contexts
+
+
+def _models():
+    return [Cchp(CchpConfig(**SMALL)), Cchp(CchpConfig(**SMALL, attention_heads=6)),
+            Ranp(RanpConfig(**SMALL, window=4)), DummyLstm()]
+
+
+@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "ranp", "lstm"])
+def test_forward_backward_and_predict(model):
+    torch.manual_seed(0)
+    targets, contexts = _batch()
+    batch = collate(targets, contexts)
+    terms = model(batch, p_tf=0.5, generator=torch.Generator().manual_seed(0), x_noise_std=1e-3)
+    for k in ("loss", "nll", "kl", "mse"):
+        assert terms[k].dim() == 0 and torch.isfinite(terms[k])
+    assert terms["kl"] >= 0
+    terms["loss"].backward()
+    for name, p in model.named_parameters():
+        assert p.grad is not None, f"no gradient reaches {name}"
+    pred = model.predict(batch)
+    assert pred["mean"].shape == batch.y.shape and pred["std"].shape == batch.y.shape
+
+
+def test_std_bounded_below_in_label_units():
+    model = Cchp(CchpConfig(**SMALL))
+    scale = torch.tensor([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+    model.normalizer.set_scales(torch.ones(36), scale)
+    with torch.no_grad():
+        for b in model.output.net.biases:
+            b.fill_(-50.0)  # push the std logits very low
+    pred = model.predict(collate(*_batch()))
+    assert torch.all(pred["std"] >= model.cfg.std_min * scale - 1e-6)
+
+
+def test_kl_of_identical_gaussians_is_zero():
+    mu, sigma = torch.randn(5, 4), torch.rand(5, 4) + 0.1
+    assert torch.allclose(gaussian_kl(mu, sigma, mu, sigma), torch.zeros(5), atol=1e-6)
+    assert torch.all(gaussian_kl(mu + 1, sigma, mu, sigma) > 0)
+
+
+@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "ranp", "lstm"])
+def test_padding_does_not_change_a_clip(model):
+    """A target batched with longer targets and contexts gets the same prediction as alone."""
+    model.eval()
+    targets, contexts = _batch(seed=1, b=3)
+    alone = model.predict(collate(targets[:1], contexts[:1]))["mean"][0]
+    together = model.predict(collate(targets, contexts))["mean"][0, : len(alone)]
+    assert torch.allclose(alone, together, atol=1e-5)
+    g = lambda: torch.Generator().manual_seed(0)
+    one = model(collate(targets[:1], contexts[:1]), sample_posterior=False, generator=g())["loss_per_clip"][0]
+    both = model(collate(targets, contexts), sample_posterior=False, generator=g())["loss_per_clip"][0]
+    assert torch.allclose(one, both, rtol=1e-4, atol=1e-3)
+
+
+def test_context_order_does_not_matter():
+    model = Cchp(CchpConfig(**SMALL)).eval()
+    targets, contexts = _batch(seed=2, b=1)
+    contexts = [[_clip(np.random.default_rng(5), 7), _clip(np.random.default_rng(6), 11)]]
+    a = model.predict(collate(targets, contexts))["mean"]
+    b = model.predict(collate(targets, [contexts[0][::-1]]))["mean"]
+    assert torch.allclose(a, b, atol=1e-5)
+
+
+def test_full_teacher_forcing_feeds_the_ground_truth():
+    """With p_TF = 1 a step's output cannot depend on the previous step's prediction."""
+    model = Cchp(CchpConfig(**SMALL)).eval()
+    batch = collate(*_batch(seed=3, b=2))
+    ctx, _ = model.encode_context(batch)
+    z = ctx.z_mu
+    x, y = model.normalizer_x(batch.x), model.normalizer_y(batch.y)
+    m1, _, _ = model.decode(x, ctx, z, y_teacher=y, p_tf=1.0)
+    with torch.no_grad():
+        model.output.net.biases[-1][:, 0] += 1.0  # shifts every predicted mean by 1
+    m2, _, _ = model.decode(x, ctx, z, y_teacher=y, p_tf=1.0)
+    assert torch.allclose(m2 - m1, torch.ones_like(m1), atol=1e-5)
+    m3, _, _ = model.decode(x, ctx, z)  # free-running: the shift feeds back
+    assert not torch.allclose(m3 - m1, torch.ones_like(m1), atol=1e-3)
+
+
+def test_teacher_forcing_schedules():
+    cfg = TrainConfig(steps=1600, tf_hold_steps=600)
+    assert cfg.p_tf(0) == pytest.approx(0.9) and cfg.p_tf(599) == pytest.approx(0.9)
+    assert cfg.p_tf(1100) == pytest.approx(0.45)
+    assert cfg.p_tf(1600) == pytest.approx(0.0)
+    assert cfg.p_tf(800) > cfg.p_tf(900)
+    fixed = TrainConfig(tf_schedule="fixed:0.9")
+    assert fixed.p_tf(0) == fixed.p_tf(10_000) == pytest.approx(0.9)
+
+
+def test_default_sizes_follow_the_paper():
+    model = Cchp()
+    assert model.cell.fingers.net[0].in_features == 6
+    assert model.cell.hand[0].in_features == 320  # 6 parts x 32 + H
+    assert model.cell.lstm.hidden_size == 128
+    assert model.latent.aggregate[0].in_features == 134  # H + 6
+    assert model.latent.mu_head.out_features == 32
+    assert model.attention.kq.out_features == 32
+
+
+def test_checkpoint_roundtrip_and_errors(tmp_path):
+    model = Cchp(CchpConfig(**SMALL))
+    model.normalizer.set_scales(torch.rand(36) + 0.5, torch.rand(6) + 0.5)
+    path = tmp_path / "ck.pt"
+    save_checkpoint(path, model, {"model": "cchp", "seed": 3}, step=7, meta={"train_time_s": 1.5})
+    loaded, payload = load_checkpoint(path)
+    assert payload["step"] == 7 and payload["train_config"]["seed"] == 3
+    batch = collate(*_batch())
+    assert torch.allclose(model.eval().predict(batch)["mean"], loaded.predict(batch)["mean"])
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    truncated = tmp_path / "trunc.pt"
+    truncated.write_bytes(path.read_bytes()[:500])
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(3)}, foreign)
+    for p in (bad, truncated, foreign, tmp_path / "missing.pt"):
+        with pytest.raises(CheckpointError) as err:
+            load_checkpoint(p)
+        assert str(p) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_beta_nll_changes_the_objective_not_the_reported_elbo():
+    model = Cchp(CchpConfig(**SMALL))
+    batch = collate(*_batch(seed=4))
+    g = lambda: torch.Generator().manual_seed(0)
+    plain = model(batch, generator=g())
+    beta = model(batch, generator=g(), nll_beta=1.0)
+    assert torch.allclose(plain["elbo_loss"], beta["elbo_loss"])
+    assert torch.allclose(plain["loss"], plain["elbo_loss"])
+    assert not torch.allclose(beta["loss"], beta["elbo_loss"])

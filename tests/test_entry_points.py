@@ -1,0 +1,95 @@
+"""The run CLI rejects every kind of bad input file with exit status 2 and one line naming the file."""
+
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+from rtcohand_drake.data.dataset import write_dataset
+from rtcohand_drake.data.population import GeneratorConfig, generate_population
+
+
+@pytest.fixture(scope="module")
+def good_data(tmp_path_factory):
+    path = tmp_path_factory.mktemp("data") / "one_user.h5"
+    write_dataset(path, [c for c in generate_population(GeneratorConfig(), n_users=1, seed=1)][:6])
+    return path
+
+
+def _run(*args):
+    return subprocess.run([sys.executable, "-m", "rtcohand_drake.run", "--no-meshcat", "--realtime-rate", "0",
+                           "--duration", "1", *args], capture_output=True, text=True, timeout=300)
+
+
+def _assert_one_line(proc, *fragments):
+    assert proc.returncode == 2, (proc.returncode, proc.stderr[-2000:])
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def _corrupt_copies(tmp_path, good):
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 3])
+    not_hdf5 = tmp_path / "text.h5"
+    not_hdf5.write_text("this is not HDF5\n")
+    wrong_format = tmp_path / "wrong_format.h5"
+    wrong_format.write_bytes(good.read_bytes())
+    with h5py.File(wrong_format, "r+") as f:
+        f.attrs["format"] = "something-else"
+    wrong_shape = tmp_path / "wrong_shape.h5"
+    wrong_shape.write_bytes(good.read_bytes())
+    with h5py.File(wrong_shape, "r+") as f:
+        user = next(iter(f["users"]))
+        clip = next(iter(f["users"][user]["clips"]))
+        group = f["users"][user]["clips"][clip]
+        del group["keypoints"]
+        group.create_dataset("keypoints", data=np.zeros((5, 20, 3), np.float32))
+    return {"truncated": truncated, "not_hdf5": not_hdf5, "wrong_format": wrong_format,
+            "wrong_shape": wrong_shape, "missing": tmp_path / "nowhere.h5"}
+
+
+@pytest.mark.parametrize("kind", ["truncated", "not_hdf5", "wrong_format", "wrong_shape", "missing"])
+def test_corrupt_gesture_file(tmp_path, good_data, kind):
+    bad = _corrupt_copies(tmp_path, good_data)[kind]
+    _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(bad)), str(bad))
+
+
+@pytest.mark.parametrize("kind", ["truncated", "wrong_format", "missing"])
+def test_corrupt_context_file(tmp_path, good_data, kind):
+    bad = _corrupt_copies(tmp_path, good_data)[kind]
+    _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(good_data),
+                          "--context-file", str(bad)), str(bad))
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 not really a zip", b"plain text"])
+def test_corrupt_model_file(tmp_path, good_data, content):
+    bad = tmp_path / "policy.pt"
+    bad.write_bytes(content)
+    _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(good_data), "--model", str(bad)),
+                     str(bad))
+
+
+def test_unknown_clip_and_user(good_data):
+    _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(good_data), "--clip", "nobody/x"),
+                     "nobody/x")
+
+
+def test_malformed_yaml(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("cell: {mold: [1, 2\n")
+    _assert_one_line(_run("--scenario", str(path)), str(path), "malformed YAML")
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--gesture-source", "replay"], "needs --gesture-file"),
+    (["--context-user", "u0"], "--context-user goes with --context-file"),
+    (["--gesture-source", "bogus"], "invalid choice"),
+    (["--seed", "x"], "invalid int value"),
+])
+def test_bad_flags(args, fragment):
+    _assert_one_line(_run(*args), fragment)

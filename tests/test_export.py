@@ -1,0 +1,125 @@
+"""The exported TorchScript policy (contracts §5) against the Python model."""
+
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from rtcohand_drake.export import export_checkpoint, load_policy, script_policy
+from rtcohand_drake.model.batching import collate, collate_context
+from rtcohand_drake.model.cchp import Cchp, CchpConfig
+from rtcohand_drake.model.checkpoint import CheckpointError, save_checkpoint
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "models" / "cchp_default.pt"
+
+
+def _clip(rng, n):
+    return rng.normal(size=(n, 36)).astype(np.float32) * 0.3, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
+
+
+def _model(heads=1):
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(attention_heads=heads)).eval()
+    model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
+    return model
+
+
+def _run_policy(policy, target_x, context, z=None):
+    x_c, y_c, mask = collate_context(context)
+    keys, values, z_mu, z_sigma = policy.encode_context(x_c, y_c, mask)
+    h = torch.zeros(policy.hidden_size)
+    c = torch.zeros(policy.hidden_size)
+    y = torch.zeros(6)
+    means, atts = [], []
+    for t in range(len(target_x)):
+        mean, std, h, c, att = policy.step(torch.from_numpy(target_x[t]), y, h, c, keys, values,
+                                           z_mu if z is None else z)
+        assert torch.all(std > 0)
+        means.append(mean)
+        atts.append(att)
+        y = mean
+    return torch.stack(means), atts, (keys, values, z_mu, z_sigma)
+
+
+@pytest.mark.parametrize("heads", [1, 6])
+def test_whole_clip_matches_python_model(tmp_path, heads):
+    model = _model(heads)
+    rng = np.random.default_rng(heads)
+    target = _clip(rng, 45)
+    context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]
+    ref = model.predict(collate([target], [context]))["mean"][0]
+    path = tmp_path / "policy.pt"
+    torch.jit.save(script_policy(model), str(path))
+    policy = torch.jit.load(str(path))  # torch.jit.load alone, as the Drake system does
+    means, atts, (keys, values, z_mu, z_sigma) = _run_policy(policy, target[0], context)
+    assert torch.allclose(means, ref, atol=1e-5), (means - ref).abs().max()
+    k = 40 + 28 + 13
+    assert keys.shape[0] == k and values.shape == (k, 6)
+    assert z_mu.shape == (policy.latent_dim,) and z_sigma.shape == (policy.latent_dim,)
+    assert torch.all(z_sigma > 0)
+    assert atts[0].shape == ((k,) if heads == 1 else (heads, k))
+    assert torch.allclose(atts[0].sum(-1), torch.ones(()), atol=1e-5)
+    assert policy.feature_dim == 36 and policy.hidden_size == 128 and policy.latent_dim == 32
+    assert torch.allclose(values, torch.from_numpy(np.concatenate([p[1] for p in context])))
+
+
+def test_step_reads_nan_features_as_zeros():
+    policy = script_policy(_model())
+    rng = np.random.default_rng(0)
+    x_c, y_c, mask = collate_context([_clip(rng, 10)])
+    keys, values, z_mu, _ = policy.encode_context(x_c, y_c, mask)
+    h = c = torch.zeros(128)
+    nan_out = policy.step(torch.full((36,), float("nan")), torch.zeros(6), h, c, keys, values, z_mu)
+    zero_out = policy.step(torch.zeros(36), torch.zeros(6), h, c, keys, values, z_mu)
+    assert torch.allclose(nan_out[0], zero_out[0])
+
+
+def test_empty_context_mask_is_an_error():
+    policy = script_policy(_model())
+    with pytest.raises(Exception, match="no context step"):
+        policy.encode_context(torch.zeros(1, 5, 36), torch.zeros(1, 5, 6), torch.zeros(1, 5, dtype=torch.bool))
+
+
+def test_export_cli_and_bad_files(tmp_path):
+    model = _model()
+    ck = tmp_path / "ck.pt"
+    save_checkpoint(ck, model, {"model": "cchp"}, step=1)
+    out = tmp_path / "policy.pt"
+    run = subprocess.run([sys.executable, "-m", "rtcohand_drake.export", "--checkpoint", str(ck), "--out", str(out)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    policy = load_policy(out)
+    assert policy.hidden_size == 128
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"\x00garbage")
+    for args in (["--checkpoint", str(bad)], ["--checkpoint", str(tmp_path / "missing.pt")],
+                 ["--checkpoint", str(out)]):  # an export is not a checkpoint
+        run = subprocess.run([sys.executable, "-m", "rtcohand_drake.export", *args, "--out", str(tmp_path / "x.pt")],
+                             capture_output=True, text=True)
+        assert run.returncode == 2
+        lines = run.stderr.strip().splitlines()
+        assert len(lines) == 1 and args[1] in lines[0] and "Traceback" not in run.stderr
+    for p in (bad, ck, tmp_path / "missing.pt"):
+        with pytest.raises(CheckpointError, match=str(p)):
+            load_policy(p)
+    truncated = tmp_path / "trunc.pt"
+    truncated.write_bytes(out.read_bytes()[: out.stat().st_size // 2])
+    with pytest.raises(CheckpointError, match=str(truncated)):
+        load_policy(truncated)
+
+
+@pytest.mark.skipif(not SHIPPED.exists(), reason="models/cchp_default.pt not built yet")
+def test_shipped_policy_loads_and_steps():
+    assert SHIPPED.stat().st_size < 5_000_000
+    policy = torch.jit.load(str(SHIPPED))
+    assert policy.feature_dim == 36
+    x_c, y_c, mask = torch.zeros(2, 20, 36), torch.zeros(2, 20, 6), torch.ones(2, 20, dtype=torch.bool)
+    keys, values, z_mu, z_sigma = policy.encode_context(x_c, y_c, mask)
+    assert keys.shape[0] == 40 and z_mu.shape == (policy.latent_dim,)
+    out = policy.step(torch.zeros(36), torch.zeros(6), torch.zeros(policy.hidden_size),
+                      torch.zeros(policy.hidden_size), keys, values, z_mu + z_sigma * torch.randn_like(z_sigma))
+    assert out[0].shape == (6,) and out[1].shape == (6,) and torch.isfinite(out[0]).all()

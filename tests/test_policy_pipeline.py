@@ -1,0 +1,118 @@
+"""The CCHP policy system and the replay source, alone and in the full diagram."""
+
+import h5py
+import numpy as np
+import pytest
+import torch
+from pydrake.systems.analysis import Simulator
+
+from rtcohand_drake.data.dataset import load_policy_clips, read_dataset
+from rtcohand_drake.data.population import GeneratorConfig, generate_population
+from rtcohand_drake.data.dataset import write_dataset
+from rtcohand_drake.diagram import build_run_diagram
+from rtcohand_drake.gestures import ReplayGestureSource
+from rtcohand_drake.policy_file import PolicyFileError, load_policy
+from rtcohand_drake.policy_system import CchpPolicy, pack_context
+from rtcohand_drake.scenario import load_scenario
+
+
+@pytest.fixture(scope="module")
+def policy_file(tmp_path_factory):
+    """A real TorchScript export of a (randomly initialised, small) CCHP model."""
+    from rtcohand_drake.export import script_policy
+    from rtcohand_drake.model.cchp import Cchp, CchpConfig
+
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(hidden_size=32, aggregate_sizes=[32, 32], latent_trunk_sizes=[32, 32],
+                            latent_dim=8, key_size=16, output_hidden=[32]))
+    path = tmp_path_factory.mktemp("policy") / "policy.pt"
+    torch.jit.save(script_policy(model), str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    path = tmp_path_factory.mktemp("data") / "two_users.h5"
+    clips = generate_population(GeneratorConfig(), n_users=2, seed=3)
+    write_dataset(path, clips if isinstance(clips, list) else list(clips))
+    return path
+
+
+def _offline_means(module, clip_features, pieces, z):
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+    keys, values, _, _ = module.encode_context(x_c, y_c, mask)
+    h = torch.zeros(int(module.hidden_size))
+    c = torch.zeros(int(module.hidden_size))
+    y = torch.zeros(6)
+    means = []
+    with torch.no_grad():
+        for x in clip_features:
+            y, _, h, c, _ = module.step(torch.from_numpy(x.astype(np.float32)), y, h, c, keys, values,
+                                        torch.from_numpy(z.astype(np.float32)))
+            means.append(y.numpy().copy())
+    return np.array(means)
+
+
+def test_replay_through_the_diagram_matches_the_offline_module(policy_file, dataset):
+    clips = load_policy_clips(dataset)
+    target = clips[0]
+    pieces = [(c.features, c.labels) for c in clips if c.user == target.user and c is not target][:5]
+    scenario = load_scenario("inspection")
+    policy = CchpPolicy(policy_file, pieces, scenario.policy.rate_hz, seed=4)
+    source = ReplayGestureSource([target], scenario.policy.rate_hz)
+    run = build_run_diagram(scenario, source=source, policy=policy)
+    simulator = Simulator(run.diagram)
+    simulator.AdvanceTo(source.end_time)
+    log = run.loggers["policy_mean"].FindLog(simulator.get_context())
+    times, means = log.sample_times(), log.data().T
+    offline = _offline_means(load_policy(policy_file), target.features, pieces, policy.sample_z(0))
+    # The log samples at each policy period; a sample at time k/rate shows the update made at (k-1)/rate.
+    k = np.round(times * scenario.policy.rate_hz).astype(int)
+    shown = k - 1
+    ok = (shown >= 0) & (shown < len(offline))
+    assert ok.sum() >= len(offline) - 2
+    assert np.max(np.abs(means[ok] - offline[shown[ok]])) < 1e-4
+
+
+def test_policy_resamples_z_on_resume(policy_file, dataset):
+    clips = load_policy_clips(dataset)
+    pieces = [(c.features, c.labels) for c in clips[:3]]
+    policy = CchpPolicy(policy_file, pieces, 10.0, seed=1)
+    ctx = policy.CreateDefaultContext()
+    z0 = ctx.get_discrete_state(4).get_value().copy()
+    policy.GetInputPort("gesture_features").FixValue(ctx, np.zeros(36))
+    policy.GetInputPort("resume_count").FixValue(ctx, [1.0])
+    state = policy.EvalUniquePeriodicDiscreteUpdate(ctx)
+    z1 = state.get_vector(4).get_value()
+    assert not np.allclose(z0, z1)
+    assert np.allclose(z1, policy.sample_z(1))
+    assert np.all(np.isfinite(state.get_vector(2).get_value()))  # the mean
+
+
+def test_policy_never_outputs_nan(policy_file, dataset):
+    clips = load_policy_clips(dataset)
+    policy = CchpPolicy(policy_file, [(c.features, c.labels) for c in clips[:2]], 10.0)
+    ctx = policy.CreateDefaultContext()
+    policy.GetInputPort("gesture_features").FixValue(ctx, np.full(36, np.nan))
+    policy.GetInputPort("resume_count").FixValue(ctx, [0.0])
+    state = policy.EvalUniquePeriodicDiscreteUpdate(ctx)
+    assert np.all(np.isfinite(state.get_vector(2).get_value()))
+
+
+@pytest.mark.parametrize("content, expected", [
+    (b"", "not a TorchScript policy"),
+    (b"this is not a zip file", "not a TorchScript policy"),
+])
+def test_bad_policy_file_is_one_line(tmp_path, content, expected):
+    path = tmp_path / "bad.pt"
+    path.write_bytes(content)
+    with pytest.raises(PolicyFileError) as info:
+        load_policy(path)
+    assert str(path) in str(info.value) and expected in str(info.value) and "\n" not in str(info.value)
+
+
+def test_truncated_policy_file(tmp_path, policy_file):
+    path = tmp_path / "trunc.pt"
+    path.write_bytes(policy_file.read_bytes()[: 4000])
+    with pytest.raises(PolicyFileError, match="not a TorchScript policy"):
+        load_policy(path)
