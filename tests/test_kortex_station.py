@@ -386,21 +386,25 @@ CLI_ARGS = ["--hardware", "--robot-ip", ROBOT_IP, "--no-meshcat", "--gesture-sou
             "--realtime-rate", "0"]
 
 
-def test_cli_ctrl_c_stops_the_arm(fake_arm_for_cli, monkeypatch, capsys):
-    """A real SIGINT in the middle of the run: the CLI stops the arm, closes the session, exits 130."""
+def test_cli_ctrl_c_stops_the_arm(fake_arm_for_cli, capsys):
+    """Ctrl-C (a real SIGINT from outside) in the middle of the run: the arm stops, the session closes, exit 130."""
+    import os
+    import threading
+
     from rtcohand_drake import run as run_module
-    from rtcohand_drake.scripted import ScriptedTwist
 
-    original = ScriptedTwist.twist_at
+    def press_ctrl_c():  # once the arm is being commanded, as a person at the keyboard would
+        deadline = time.monotonic() + 60
+        while "SendJointSpeedsCommand" not in fake_arm_for_cli.call_names() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.2)
+        os.kill(os.getpid(), signal.SIGINT)
 
-    def interrupt_once(self, t):
-        if t >= 0.5 and not getattr(self, "_interrupted", False):
-            self._interrupted = True
-            signal.raise_signal(signal.SIGINT)
-        return original(self, t)
-
-    monkeypatch.setattr(ScriptedTwist, "twist_at", interrupt_once)
-    status = run_cli(run_module.main, [*CLI_ARGS, "--duration", "3"], prog="rtcohand_drake.run")
+    presser = threading.Thread(target=press_ctrl_c, daemon=True)
+    presser.start()
+    args = [a for a in CLI_ARGS if a not in ("--realtime-rate", "0")] + ["--realtime-rate", "1", "--duration", "30"]
+    status = run_cli(run_module.main, args, prog="rtcohand_drake.run")
+    presser.join(timeout=5)
     assert status == 130
     assert "interrupted" in capsys.readouterr().err
     assert_ends_with_stop(fake_arm_for_cli)
