@@ -36,10 +36,10 @@ from pydrake.multibody.inverse_kinematics import (
     DoDifferentialInverseKinematics,
 )
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.scenario import Scenario
-from rtcohand_drake.station import GEN3_JOINTS, make_control_plant
+from rtcohand_drake.station import make_control_plant
 
 
 class FollowStatus(enum.IntEnum):
@@ -67,7 +67,6 @@ class TwistToJointVelocity(LeafSystem):
         super().__init__()
         self._plant, instances = make_control_plant(scenario)
         self._plant_context = self._plant.CreateDefaultContext()
-        gen3 = instances["gen3"]
         self._frame_E = self._plant.GetFrameByName("workpiece", instances["workpiece"])
         self._R_WU = scenario.cell.user_frame.to_rigid_transform().rotation()
         cfg = scenario.diff_ik

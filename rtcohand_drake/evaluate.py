@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from rtcohand_drake.errors import InputError, run_cli
-from rtcohand_drake.model.batching import Batch, collate
+from rtcohand_drake.model.batching import collate
 from rtcohand_drake.model.checkpoint import load_checkpoint
 
 SETTINGS = ("D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy")
@@ -406,7 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-sweep", action="store_true", help="11 noise levels on D+U+ (noise_sweep.png)")
     p.add_argument("--spectrum", action="store_true", help="spectrum of predictions at three noise levels")
     p.add_argument("--attention", action="store_true", help="attention heatmap of the first CCHP checkpoint")
-    p.add_argument("--threads", type=int, default=0)
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch default)")
     p.add_argument("--max-episodes", type=int, default=0, help="use at most this many episodes per setting (0: all)")
     return p
 

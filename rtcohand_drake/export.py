@@ -29,16 +29,16 @@ import os
 import pathlib
 import sys
 import warnings
-import zipfile
 from typing import List, Optional, Sequence, Tuple
 
 import torch
 from torch import nn
 
 from rtcohand_drake.errors import InputError, run_cli
-from rtcohand_drake.model.blocks import FEATURE_DIM, MOTION_DIM, NUM_PARTS, PART_DIM
+from rtcohand_drake.model.blocks import FEATURE_DIM, MOTION_DIM
 from rtcohand_drake.model.cchp import Cchp
-from rtcohand_drake.model.checkpoint import CheckpointError, load_checkpoint
+from rtcohand_drake.model.checkpoint import load_checkpoint
+from rtcohand_drake.policy_file import load_policy  # noqa: F401  (also the export check below)
 
 
 class CchpPolicy(nn.Module):
@@ -173,28 +173,6 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
     torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
     os.replace(tmp, out)
     return out
-
-
-def load_policy(path: os.PathLike) -> torch.jit.ScriptModule:
-    """Load an exported policy; a missing, corrupt or wrong file is a CheckpointError naming it."""
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such policy file")
-    if not zipfile.is_zipfile(path):
-        raise CheckpointError(f"{path}: not a TorchScript policy (not a PyTorch archive; truncated or corrupt?)")
-    with zipfile.ZipFile(path) as archive:
-        if not any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist()):
-            raise CheckpointError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
-                                  "python -m rtcohand_drake.export)")
-    try:
-        module = torch.jit.load(str(path), map_location="cpu")
-    except Exception as err:  # torch raises RuntimeError and others for a damaged archive
-        text = str(err).strip().splitlines()
-        raise CheckpointError(f"{path}: not a TorchScript policy ({type(err).__name__}: {text[0][:160] if text else ''})") from None
-    for name in ("encode_context", "step", "feature_dim", "hidden_size", "latent_dim"):
-        if not hasattr(module, name):
-            raise CheckpointError(f"{path}: TorchScript module lacks {name!r} (not a CCHP policy export)")
-    return module
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

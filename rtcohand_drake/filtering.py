@@ -24,7 +24,7 @@ Output ports
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.scenario import CommandFilter
 

@@ -16,7 +16,7 @@ REQUIRED = ("encode_context", "step", "feature_dim", "hidden_size", "latent_dim"
 
 
 class PolicyFileError(InputError):
-    """A policy file that cannot be used; one line naming the file and the problem."""
+    """A model file (exported policy or training checkpoint) that cannot be used; one line naming the file."""
 
 
 def load_policy(path: os.PathLike):

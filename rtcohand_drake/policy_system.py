@@ -25,7 +25,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.policy_file import load_policy
 

@@ -62,7 +62,7 @@ class TrainConfig:
     validate_every: int = 250
     validation_episodes: int = 64
     log_every: int = 10
-    threads: int = 0  # torch intra-op threads per process (0: leave torch's default)
+    threads: int = 1  # torch intra-op threads per process (0: torch default); the step loop is overhead-bound
     max_minutes: float = 0.0  # stop early (and save) after this wall time; 0: no limit
 
     def p_tf(self, step: int) -> float:

@@ -1,6 +1,5 @@
 """MovingAverageDownsampler and SafetySupervisor, each tested alone (fixed inputs, forced updates)."""
 
-import dataclasses as dc
 
 import numpy as np
 import pytest

@@ -1,7 +1,6 @@
 """Every notebook runs, in its short mode (RTCOHAND_NOTEBOOK_SHORT=1), and is committed without outputs."""
 
 import json
-import os
 from pathlib import Path
 
 import nbformat

@@ -1,12 +1,11 @@
 """The CCHP policy system and the replay source, alone and in the full diagram."""
 
-import h5py
 import numpy as np
 import pytest
 import torch
 from pydrake.systems.analysis import Simulator
 
-from rtcohand_drake.data.dataset import load_policy_clips, read_dataset
+from rtcohand_drake.data.dataset import load_policy_clips
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.diagram import build_run_diagram

@@ -22,7 +22,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.operator_panel import ScriptedOperator
 from rtcohand_drake.policy_system import CchpPolicy
-from rtcohand_drake.safety import Mode, plausible_features
+from rtcohand_drake.safety import plausible_features
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.station import eye_position
 

@@ -99,18 +99,3 @@ class Normalizer(nn.Module):
         self.feature_scale.copy_(torch.as_tensor(feature_scale, dtype=torch.float32).clamp_min(1e-6))
         self.label_scale.copy_(torch.as_tensor(label_scale, dtype=torch.float32).clamp_min(1e-6))
 
-
-def masked_mean_by_group(
-    values: torch.Tensor, mask: torch.Tensor, group: torch.Tensor, num_groups: int
-) -> torch.Tensor:
-    """Mean of values (N, T, F) over the valid steps of all sequences of each group.
-
-    mask (N, T) bool marks valid steps, group (N,) long gives each sequence's group.
-    Returns (num_groups, F).
-    """
-    m = mask.to(values.dtype).unsqueeze(-1)
-    sums = (values * m).sum(1)  # (N, F)
-    counts = m.sum(1)  # (N, 1)
-    total = values.new_zeros(num_groups, values.shape[-1]).index_add_(0, group, sums)
-    count = values.new_zeros(num_groups, 1).index_add_(0, group, counts)
-    return total / count.clamp_min(1.0)

@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from rtcohand_drake.errors import InputError
+from rtcohand_drake.policy_file import PolicyFileError
 from rtcohand_drake.model.cchp import Cchp, CchpConfig
 from rtcohand_drake.model.lstm_baseline import DummyLstm, LstmConfig
 from rtcohand_drake.model.ranp import Ranp, RanpConfig
@@ -33,8 +34,8 @@ MODEL_KINDS = {
 }
 
 
-class CheckpointError(InputError):
-    """A checkpoint (or exported policy) file that cannot be used; one line naming the file."""
+# One error class for model files, training checkpoints and exported policies alike.
+CheckpointError = PolicyFileError
 
 
 def build_model(kind: str, config: Optional[Dict[str, Any]] = None) -> nn.Module:
