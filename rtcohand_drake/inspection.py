@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses as dc
 
 import numpy as np
+from pydrake.geometry import Role
 
 from rtcohand_drake.workpiece_faces import FACES
 
@@ -67,3 +68,50 @@ def measure_inspection(times: np.ndarray, poses: np.ndarray, eye_xyz,
     done = [t for t in inspected_at.values() if np.isfinite(t)]
     completed = len(done) == len(FACES)
     return InspectionResult(inspected_at, len(done), completed, max(done) if completed else float("nan"))
+
+
+def mold_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 25.0) -> tuple[float, float]:
+    """Smallest signed distance (m) between the workpiece and the mold's walls while close, and when.
+
+    Replays the logged joint angles through the cell's geometry (Drake's
+    SceneGraph signed-distance queries), at `rate_hz`. A value <= 0 means the
+    part touched the mold. Returns (min distance, its time); (inf, nan) if
+    the part was never within 5 cm of the mold.
+    """
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+
+    from rtcohand_drake.station import add_cell_models
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    instances = add_cell_models(plant, scenario)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyContextFromRoot(context)
+    sg_context = scene_graph.GetMyContextFromRoot(context)
+    inspector = scene_graph.model_inspector()
+
+    def geometries(name):
+        ids = []
+        for body in plant.GetBodyIndices(instances[name]):
+            frame = plant.GetBodyFrameIdOrThrow(body)
+            ids += list(inspector.GetGeometries(frame, Role.kProximity))
+        return ids
+
+    part = geometries("workpiece")
+    mold = [g for g in geometries("mold") if "wall" in inspector.GetName(g)]  # the cavity walls, not its floor
+    best, when = float("inf"), float("nan")
+    if len(times) == 0:
+        return best, when
+    stride = max(1, int(round(1.0 / (rate_hz * max(np.median(np.diff(times)), 1e-9))))) if len(times) > 1 else 1
+    for k in range(0, len(times), stride):
+        plant.SetPositions(plant_context, q[k])
+        query = scene_graph.get_query_output_port().Eval(sg_context)
+        for a in part:
+            for b in mold:
+                d = query.ComputeSignedDistancePairClosestPoints(a, b).distance
+                if d < 0.05 and d < best:
+                    best, when = float(d), float(times[k])
+    return best, when

@@ -22,6 +22,8 @@ import time
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from rtcohand_drake.errors import InputError, run_cli
 
 GESTURE_SOURCES = ("synthetic", "replay", "camera", "scripted")
@@ -233,8 +235,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
     log.completed, log.faces_inspected, log.completion_time = (
         result.completed, result.faces_inspected, result.completion_time)
+    from rtcohand_drake.inspection import mold_clearance
+
+    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
     log.extra_attrs.update(seed=args.seed, sim_duration_s=sim_time, interrupted=interrupted,
-                           filter_mode=scenario.command_filter.mode)
+                           filter_mode=scenario.command_filter.mode, mold_touched=bool(clearance <= 0.0),
+                           mold_min_clearance_m=clearance)
+    if clearance <= 0.0:
+        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
+        log.events.sort(key=lambda e: e.time)
     if fault is not None:
         log.add_event(sim_time, "fault", str(fault))
         log.completed = False
@@ -255,6 +264,10 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"in {wall:.1f} s ({sim_time / max(wall, 1e-9):.1f}x real time)")
     print(f"faces inspected: {log.faces_inspected}/6, completion: {completion}")
     print(f"peak workpiece speed: {v_peak:.3f} m/s, {w_peak:.3f} rad/s")
+    near = "never near the mold" if not np.isfinite(clearance) else (
+        f"TOUCHED the mold at {clearance_t:.1f} s" if clearance <= 0.0 else
+        f"cleared the mold walls (closest {clearance * 1e3:.1f} mm)")
+    print(f"mold: {near}")
     kinds: dict[str, int] = {}
     for e in log.events:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1

@@ -132,3 +132,14 @@ def test_run_cli_bad_arguments(args, expected):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and expected in proc.stderr, proc.stderr
+
+
+def test_mold_clearance_sees_wall_contact(scenario):
+    from rtcohand_drake.inspection import mold_clearance
+
+    q0 = np.asarray(scenario.robot.q0_rad)
+    resting, _ = mold_clearance(scenario, np.array([0.0]), q0[None])
+    assert 0.005 < resting < 0.010  # about 8 mm to each wall at rest
+    swung = q0 + np.array([0.08, 0, 0, 0, 0, 0, 0])  # base joint turned: the part swings into a wall
+    touching, when = mold_clearance(scenario, np.array([0.0, 1.0]), np.stack([q0, swung]))
+    assert touching < 0.0 and when == 1.0
