@@ -393,6 +393,9 @@ def test_cli_ctrl_c_stops_the_arm(fake_arm_for_cli, capsys):
 
     from rtcohand_drake import run as run_module
 
+    # As in a terminal: a test runner started in the background inherits SIGINT ignored.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+
     def press_ctrl_c():  # once the arm is being commanded, as a person at the keyboard would
         deadline = time.monotonic() + 60
         while "SendJointSpeedsCommand" not in fake_arm_for_cli.call_names() and time.monotonic() < deadline:
@@ -403,8 +406,11 @@ def test_cli_ctrl_c_stops_the_arm(fake_arm_for_cli, capsys):
     presser = threading.Thread(target=press_ctrl_c, daemon=True)
     presser.start()
     args = [a for a in CLI_ARGS if a not in ("--realtime-rate", "0")] + ["--realtime-rate", "1", "--duration", "30"]
-    status = run_cli(run_module.main, args, prog="rtcohand_drake.run")
-    presser.join(timeout=5)
+    try:
+        status = run_cli(run_module.main, args, prog="rtcohand_drake.run")
+    finally:
+        presser.join(timeout=5)
+        signal.signal(signal.SIGINT, previous)
     assert status == 130
     assert "interrupted" in capsys.readouterr().err
     assert_ends_with_stop(fake_arm_for_cli)
