@@ -46,7 +46,8 @@ class TrainConfig:
     tf_schedule: str = "curriculum"  # "curriculum" or "fixed:P"
     tf_start: float = 0.9  # curriculum: p_TF held here ...
     tf_hold_steps: int = 600  # ... for this many steps, then decays linearly ...
-    tf_end: float = 0.0  # ... to this value at the last step
+    tf_end: float = 0.0  # ... to this value at the last step (or after tf_decay_steps)
+    tf_decay_steps: int = 0  # length of the linear decay; 0: it ends at the last step
     p_d: float = 0.5  # probability that the chosen context clip has the target's active dimensions
     p_u: float = 0.5  # probability that it comes from the target's user
     n_random: int = 2  # further random context clips per target
@@ -71,7 +72,8 @@ class TrainConfig:
             return float(self.tf_schedule.split(":", 1)[1])
         if step < self.tf_hold_steps:
             return self.tf_start
-        span = max(1, self.steps - self.tf_hold_steps)
+        span = self.tf_decay_steps if self.tf_decay_steps > 0 else self.steps - self.tf_hold_steps
+        span = max(1, span)
         frac = min(1.0, (step - self.tf_hold_steps) / span)
         return self.tf_start + (self.tf_end - self.tf_start) * frac
 
@@ -344,6 +346,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tf-start", type=float, default=d.tf_start)
     p.add_argument("--tf-hold-steps", type=int, default=d.tf_hold_steps)
     p.add_argument("--tf-end", type=float, default=d.tf_end)
+    p.add_argument("--tf-decay-steps", type=int, default=d.tf_decay_steps,
+                   help="steps of the linear decay after the hold; 0 (default): it ends at the last step")
     p.add_argument("--p-d", type=float, default=d.p_d)
     p.add_argument("--p-u", type=float, default=d.p_u)
     p.add_argument("--n-random", type=int, default=d.n_random)
