@@ -100,6 +100,15 @@ def write_run_log(path: str | Path, log: RunLog) -> Path:
     return path
 
 
+def _plain(value):
+    """An HDF5 attribute as a plain Python value."""
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 def read_run_log(path: str | Path) -> RunLog:
     path = Path(path)
     try:
@@ -110,6 +119,9 @@ def read_run_log(path: str | Path) -> RunLog:
                 completed=bool(f.attrs.get("completed", False)),
                 faces_inspected=int(f.attrs.get("faces_inspected", 0)),
                 completion_time=float(f.attrs.get("completion_time", np.nan)))
+            known = {"format", "version", "scenario", "model", "gesture_source", "completed",
+                     "faces_inspected", "completion_time"}
+            log.extra_attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in known}
             for name, field in _DATASETS.items():
                 if name in f:
                     setattr(log, field, f[name][()])

@@ -110,6 +110,9 @@ def test_teacher_forcing_schedules():
     assert cfg.p_tf(1100) == pytest.approx(0.45)
     assert cfg.p_tf(1600) == pytest.approx(0.0)
     assert cfg.p_tf(800) > cfg.p_tf(900)
+    short_decay = TrainConfig(steps=4000, tf_hold_steps=300, tf_decay_steps=1200)
+    assert short_decay.p_tf(900) == pytest.approx(0.45)
+    assert short_decay.p_tf(1500) == short_decay.p_tf(3999) == pytest.approx(0.0)
     fixed = TrainConfig(tf_schedule="fixed:0.9")
     assert fixed.p_tf(0) == fixed.p_tf(10_000) == pytest.approx(0.9)
 

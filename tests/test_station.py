@@ -9,6 +9,7 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from rtcohand_drake.initial_pose import solve_initial_q, workpiece_rest_pose
+from rtcohand_drake.run_log import read_run_log
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.station import make_control_plant, make_sim_station
 
@@ -119,6 +120,10 @@ def test_run_cli_headless_writes_log(tmp_path):
         # The scripted motion starts by lifting the part straight up out of the mold.
         assert pose[-1, 2] > pose[0, 2] + 0.15
     assert not list(tmp_path.glob("*.partial"))
+    back = read_run_log(log)  # the reader returns what the run wrote, extra attributes included
+    assert np.array_equal(back.robot_q, q)
+    assert back.extra_attrs["mold_touched"] is False and back.extra_attrs["seed"] == 0
+    assert back.extra_attrs["mold_min_clearance_m"] > 0.0
 
 
 @pytest.mark.parametrize("args, expected", [

@@ -118,17 +118,19 @@ def sample_context(
     p_cxt: float = 0.5,
 ) -> list[Piece]:
     """Context pieces for one training target (rules in the module docstring)."""
-    labelled = [c for c in pool if c.labels is not None]
+    index = _pool_index(pool)
+    labelled = index.labelled
     if not labelled:
         raise ValueError("the context pool holds no labelled clip")
     want_d = rng.random() < p_d
     want_u = rng.random() < p_u
-    is_d = [contains_dims(c, target) == want_d for c in labelled]
-    is_u = [(c.user == target.user) == want_u for c in labelled]
+    t_mask = _dims_mask(target)
+    is_d = ((index.dims & t_mask) == t_mask) == want_d
+    is_u = (index.users == target.user) == want_u
     chosen = None
-    for keep in ([a and b for a, b in zip(is_d, is_u)], is_d, [True] * len(labelled)):
-        idx = [i for i, k in enumerate(keep) if k]
-        if idx:
+    for keep in (is_d & is_u, is_d, np.ones(len(labelled), bool)):
+        idx = np.flatnonzero(keep)
+        if len(idx):
             chosen = labelled[idx[int(rng.integers(len(idx)))]]
             break
     assert chosen is not None
@@ -138,11 +140,45 @@ def sample_context(
         pieces = [_target_slice(target, rng, t_min, p_cxt)]
     else:
         pieces = [_whole(chosen)]
-    others = [c for c in labelled if not _same(c, target) and not _same(c, chosen)]
-    if others and n_random > 0:
+    not_target = ~((index.users == target.user) & (index.clip_ids == target.clip_id))
+    not_chosen = ~((index.users == chosen.user) & (index.clip_ids == chosen.clip_id))
+    others = np.flatnonzero(not_target & not_chosen)
+    if len(others) and n_random > 0:
         pick = rng.choice(len(others), size=min(n_random, len(others)), replace=False)
-        pieces.extend(_whole(others[int(i)]) for i in pick)
+        pieces.extend(_whole(labelled[others[int(i)]]) for i in pick)
     return pieces
+
+
+@dataclass
+class _PoolIndex:
+    """The labelled clips of a context pool with their users, clip ids and dimension masks as arrays."""
+
+    labelled: list
+    users: np.ndarray
+    clip_ids: np.ndarray
+    dims: np.ndarray  # bit d set: dimension d is active
+
+
+def _dims_mask(clip: PolicyClip) -> int:
+    return sum(1 << d for d in _dims(clip))
+
+
+_POOL_INDEXES: dict[int, tuple[Sequence[PolicyClip], int, _PoolIndex]] = {}
+
+
+def _pool_index(pool: Sequence[PolicyClip]) -> _PoolIndex:
+    """The index of a pool, built once per pool object (training samples from the same pool every step)."""
+    cached = _POOL_INDEXES.get(id(pool))
+    if cached is not None and cached[0] is pool and cached[1] == len(pool):
+        return cached[2]
+    labelled = [c for c in pool if c.labels is not None]
+    index = _PoolIndex(labelled, np.array([c.user for c in labelled], dtype=object),
+                       np.array([c.clip_id for c in labelled], dtype=object),
+                       np.array([_dims_mask(c) for c in labelled], dtype=np.int64))
+    if len(_POOL_INDEXES) >= 8:
+        _POOL_INDEXES.clear()
+    _POOL_INDEXES[id(pool)] = (pool, len(pool), index)
+    return index
 
 
 @dataclass

@@ -1,0 +1,101 @@
+"""The inspection task for each out-sample user, through the run CLI itself.
+
+    python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
+        [--duration 120] [--jobs 2] [--out DIR]
+
+Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
+--no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
+built-in simulated operator is that user, acting in closed loop; the policy's
+context is that user's own labelled clips) and prints one table row per user
+from the run log: faces inspected, completion time, the closest approach to
+the mold walls, the peak workpiece speeds against the scenario's limits, the
+largest joint position and speed over the model's limits, and the safety
+events. The goal: all six faces within 120 s, no mold contact and no limit
+exceeded, for at least 4 of the 5 users.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from rtcohand_drake.diagram import peak_speeds
+from rtcohand_drake.run_log import read_run_log
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.station import make_control_plant
+
+
+def joint_excess(scenario, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """Largest excursion beyond the joint position limits (rad) and speed limits (rad/s); <= 0: within."""
+    plant, _ = make_control_plant(scenario)
+    lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    vmax = plant.GetVelocityUpperLimits()
+    with np.errstate(invalid="ignore"):
+        over_q = np.nanmax(np.maximum(q - hi, lo - q)) if len(q) else -np.inf
+        over_v = np.nanmax(np.abs(v) - vmax) if len(v) else -np.inf
+    return float(over_q), float(over_v)
+
+
+def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
+    log = out / f"{user}.h5"
+    cmd = [sys.executable, "-m", "rtcohand_drake.run", "--scenario", args.scenario, "--realtime-rate", "0",
+           "--no-meshcat", "--user", user, "--duration", str(args.duration), "--log", str(log)]
+    if args.model:
+        cmd += ["--model", args.model]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    return user, done.returncode, done.stderr.strip().splitlines()[-1] if done.returncode else ""
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", default=None, help="policy file (default: the shipped models/cchp_default.pt)")
+    p.add_argument("--scenario", default="inspection")
+    p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
+    p.add_argument("--duration", type=float, default=120.0)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
+    args = p.parse_args()
+    scenario = load_scenario(args.scenario)
+    v_lim, w_lim = scenario.safety.max_linear_speed_m_s, scenario.safety.max_angular_speed_rad_s
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(args.out or tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        with ThreadPoolExecutor(args.jobs) as pool:
+            results = list(pool.map(lambda u: run_user(u, args, out), args.users))
+        print(f"model: {args.model or 'models/cchp_default.pt'}; limits {v_lim} m/s, {w_lim} rad/s")
+        print("| user | faces | completion | mold (closest, mm) | peak v (m/s) | peak w (rad/s) "
+              "| joint q / v over limit | events |")
+        print("|---|---|---|---|---|---|---|---|")
+        successes = 0
+        for user, rc, err in results:
+            if rc not in (0,):
+                print(f"| {user} | run failed (exit {rc}): {err} |")
+                continue
+            log = read_run_log(out / f"{user}.h5")
+            v_peak, w_peak = peak_speeds(log.robot_time, log.robot_workpiece_pose)
+            over_q, over_v = joint_excess(scenario, log.robot_q, log.robot_v)
+            clearance = float(log.extra_attrs.get("mold_min_clearance_m", np.inf))
+            touched = bool(log.extra_attrs.get("mold_touched", False))
+            kinds: dict[str, int] = {}
+            for e in log.events:
+                kinds[e.kind] = kinds.get(e.kind, 0) + 1
+            within = v_peak <= v_lim * 1.02 and w_peak <= w_lim * 1.02 and over_q <= 0 and over_v <= 0
+            ok = log.completed and log.completion_time <= args.duration and not touched and within
+            successes += ok
+            completion = f"{log.completion_time:.1f} s" if log.completed else "-"
+            mold = ("touched" if touched else "clear") + (f" ({clearance * 1e3:.1f})" if np.isfinite(clearance) else "")
+            events = ", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"
+            print(f"| {user} | {log.faces_inspected}/6 | {completion} | {mold} | {v_peak:.3f} | {w_peak:.3f} "
+                  f"| {max(over_q, 0):.3f} / {max(over_v, 0):.3f} | {events} |")
+        print(f"users completing the task safely: {successes}/{len(args.users)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
