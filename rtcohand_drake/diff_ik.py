@@ -94,6 +94,8 @@ class TwistToJointVelocity(LeafSystem):
         params.set_end_effector_translational_velocity_limits(-lin, lin)
         params.set_nominal_joint_position(np.asarray(scenario.robot.q0_rad, float))
         self._params = params
+        self._centering = cfg.joint_centering_gain * np.eye(n)
+        self._no_centering = np.zeros((n, n))
 
         self._twist = self.DeclareVectorInputPort("twist_command", 6)
         self._q = self.DeclareVectorInputPort("gen3.position_measured", n)
@@ -120,14 +122,16 @@ class TwistToJointVelocity(LeafSystem):
         else:
             invalid = False
         twist_U = clamp_twist(twist_U, self._cfg.max_linear_speed_m_s, self._cfg.max_angular_speed_rad_s)
+        if not twist_U.any() and not np.any(v_current):
+            # At rest and asked for no motion: the QP's answer is zero; skip it.
+            return np.zeros_like(v_current), FollowStatus.INVALID_INPUT if invalid else FollowStatus.FOLLOWING, 1.0
         self._plant.SetPositions(self._plant_context, q)
         J = self._plant.CalcJacobianSpatialVelocity(
             self._plant_context, JacobianWrtVariable.kV, self._frame_E, np.zeros(3),
             self._plant.world_frame(), self._plant.world_frame())
         V = self.desired_spatial_velocity(twist_U)
         moving = np.linalg.norm(V) > 1e-9
-        self._params.set_joint_centering_gain(
-            self._cfg.joint_centering_gain * np.eye(7) if moving else np.zeros((7, 7)))
+        self._params.set_joint_centering_gain(self._centering if moving else self._no_centering)
         # A joint that the servo's lag carried past a (margin-shrunk) limit may not go
         # further, but is not forced back at once: that would make the QP infeasible.
         lower, upper = self.joint_position_limits
