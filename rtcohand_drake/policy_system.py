@@ -69,6 +69,10 @@ class CchpPolicy(LeafSystem):
         self.period_s = 1.0 / rate_hz
         H, Dz = int(self.module.hidden_size), int(self.module.latent_dim)
         self._H, self._Dz = H, Dz
+        # TorchScript optimises a function on its first two calls (8-14 ms each here);
+        # do that now, not inside the first policy periods of a real-time run.
+        for _ in range(3):
+            self.step(np.zeros(36), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
 
         self._x = self.DeclareVectorInputPort("gesture_features", 36)
         self._resume = self.DeclareVectorInputPort("resume_count", 1)
