@@ -56,7 +56,8 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     command_period = (scenario.command_filter.command_period_s if scenario.command_filter.mode == "paper"
                       else 1.0 / scenario.policy.rate_hz)
     supervisor = builder.AddNamedSystem("safety", SafetySupervisor(
-        scenario.safety, scenario.workspace, R_WU, eye_position(scenario), command_period))
+        scenario.safety, scenario.workspace, R_WU, eye_position(scenario), command_period,
+        X_W_mold=scenario.cell.mold.to_rigid_transform()))
     if operator is None:
         operator = MeshcatOperatorPanel(meshcat, scenario.safety) if meshcat is not None else ScriptedOperator()
     operator = builder.AddNamedSystem("operator", operator)
@@ -161,7 +162,8 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         else (None, "")))
     acted = status[:, 2].round().astype(int)
     for flag, kind in ((Intervention.SPEED_CLAMP, "clamp"), (Intervention.WORKSPACE, "workspace"),
-                       (Intervention.INSPECTOR_ZONE, "inspector_zone"), (Intervention.NON_FINITE, "fault")):
+                       (Intervention.INSPECTOR_ZONE, "inspector_zone"), (Intervention.MOLD_EXIT, "mold_exit"),
+                       (Intervention.NON_FINITE, "fault")):
         on = (acted & int(flag)) != 0
         _transition_events(log, t, on, lambda o, prev, kind=kind: (
             (kind, f"{kind} limit acting") if o else (None, "")))

@@ -61,6 +61,12 @@ class Intervention(enum.IntFlag):
     WATCHDOG = 8
     PAUSED = 16
     NON_FINITE = 32
+    MOLD_EXIT = 64
+
+
+# Half extents (m) of the mold's cavity in the mold frame, x and y: models/cell/mold.sdf
+# (walls 0.03 thick around a 0.166 x 0.116 opening).
+MOLD_CAVITY_HALF_XY = (0.083, 0.058)
 
 
 def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarray:
@@ -77,9 +83,12 @@ def plausible_features(x: np.ndarray, config: Safety) -> bool:
 
 class SafetySupervisor(LeafSystem):
     def __init__(self, config: Safety, workspace: Box, R_WU: np.ndarray, eye_W: np.ndarray,
-                 command_period_s: float):
+                 command_period_s: float, X_W_mold=None):
         super().__init__()
         self._cfg = config
+        # The mold's frame (origin: centre of the cavity floor, z up out of the cavity), or None.
+        self._X_mold_W = None if X_W_mold is None else X_W_mold.inverse()
+        self._R_W_mold = None if X_W_mold is None else X_W_mold.rotation().matrix()
         self._box_lo = np.asarray(workspace.min_xyz, float)
         self._box_hi = np.asarray(workspace.max_xyz, float)
         self._R_WU = np.asarray(R_WU, float)
@@ -102,9 +111,33 @@ class SafetySupervisor(LeafSystem):
 
     # --- the rules, each a small pure function of numbers -------------------------
 
+    def in_mold_exit(self, p_W: np.ndarray) -> bool:
+        """True while the workpiece centre is over the cavity and below the exit height."""
+        if self._X_mold_W is None or self._cfg.mold_exit_height_m <= 0.0:
+            return False
+        p = self._X_mold_W.multiply(p_W)
+        margin = self._cfg.mold_exit_margin_m
+        return bool(abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
+                    and p[2] < self._cfg.mold_exit_height_m)
+
+    def limit_to_mold_exit(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
+        """In the mold's exit corridor only motion along the mold's axis passes: no turn, no sideways move."""
+        if not self.in_mold_exit(p_W):
+            return twist_U, Intervention.NONE
+        axis_W = self._R_W_mold[:, 2]
+        v_W = self._R_WU @ twist_U[:3]
+        along = float(v_W @ axis_W)
+        if along < 0.0 and self._X_mold_W.multiply(p_W)[2] <= self._cfg.mold_seat_height_m:
+            along = 0.0  # seated: pressing the part into the cavity floor only tilts it
+        out = np.zeros(6)
+        out[:3] = self._R_WU.T @ (axis_W * along)
+        acted = Intervention.MOLD_EXIT if np.max(np.abs(out - twist_U)) > 1e-9 else Intervention.NONE
+        return out, acted
+
     def limit_to_zones(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
-        """Removes velocity that would leave the workspace box or enter the inspector zone."""
-        acted = Intervention.NONE
+        """Removes velocity that would leave the workspace box, enter the inspector zone, or
+        (in the mold's exit corridor) do anything but move along the mold's axis."""
+        twist_U, acted = self.limit_to_mold_exit(twist_U, p_W)
         v_W = self._R_WU @ twist_U[:3]
         ahead = p_W + v_W * self._cfg.lookahead_s
         for axis in range(3):

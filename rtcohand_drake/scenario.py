@@ -165,6 +165,16 @@ class Safety:
     # Limit on how fast the output command may change (m/s^2, rad/s^2).
     max_linear_accel_m_s2: float = 1.0
     max_angular_accel_rad_s2: float = 6.0
+    # Mold exit corridor: while the workpiece centre is over the cavity (its opening
+    # plus this margin, m) and less than this height above the cavity floor (m), only
+    # motion along the mold's axis passes, so the hot part leaves the mold without
+    # touching its walls whatever the gesture asks. Default: the upright part (0.05 m
+    # half height) clears the 0.04 m walls at 0.09 m, plus 1 cm. 0 switches it off.
+    mold_exit_height_m: float = 0.10
+    mold_exit_margin_m: float = 0.02
+    # ... and below this height of the workpiece centre over the cavity floor (m) it may
+    # not move down (the upright part rests at 0.052 m: python -m rtcohand_drake.initial_pose).
+    mold_seat_height_m: float = 0.055
 
 
 @dc.dataclass

@@ -168,3 +168,34 @@ def test_inspector_zone_blocks_approach_to_the_eye():
     assert int(status[2]) & Intervention.INSPECTOR_ZONE
     away = _advance(s, ctx, sim, 1.0, request=[0, 0.1, 0, 0, 0, 0], pose=close)
     assert away[-1][0][1] == pytest.approx(0.1)
+
+
+def test_mold_exit_corridor_passes_only_motion_along_the_mold_axis():
+    from pydrake.math import RigidTransform
+
+    mold = RigidTransform([0.45, -0.12, 0.03])  # the inspection cell's mold frame: cavity floor centre, z up
+    s = SafetySupervisor(Safety(), BOX, R_WU, EYE, 0.5, X_W_mold=mold)
+    ctx = s.CreateDefaultContext()
+    sim = Simulator(s, ctx)
+    in_cavity = np.array([0.45, -0.12, 0.03 + 0.052, 1, 0, 0, 0])  # the part at rest in the mold
+    ask = [0.1, -0.05, 0.08, 0.3, -0.2, 0.5]  # sideways, up and turning at once
+    cmd, status = _advance(s, ctx, sim, 1.0, request=ask, pose=in_cavity)[-1]
+    assert np.allclose(cmd, [0, 0, 0.08, 0, 0, 0], atol=1e-12)  # U z is world z: only the lift passes
+    assert int(status[2]) & Intervention.MOLD_EXIT
+    # Seated in the cavity, the part may not be pushed further down; a little higher it may.
+    down = [0.0, 0.0, -0.05, 0.2, 0.0, 0.0]
+    cmd, _ = _advance(s, ctx, sim, 1.0, request=down, pose=in_cavity)[-1]
+    assert np.allclose(cmd, 0.0, atol=1e-12)
+    raised = np.r_[0.45, -0.12, 0.03 + 0.07, 1, 0, 0, 0]
+    cmd, _ = _advance(s, ctx, sim, 1.0, request=down, pose=raised)[-1]
+    assert np.allclose(cmd, [0, 0, -0.05, 0, 0, 0], atol=1e-12)
+    # Above the exit height (0.10 m over the floor) or beside the cavity, everything passes again.
+    for clear in ([0.45, -0.12, 0.03 + 0.11], [0.45 + 0.083 + 0.03, -0.12, 0.03 + 0.052]):
+        cmd, status = _advance(s, ctx, sim, 2.0, request=ask, pose=np.r_[clear, 1, 0, 0, 0])[-1]
+        assert np.allclose(cmd, ask, atol=1e-9), clear
+        assert not int(status[2]) & Intervention.MOLD_EXIT
+    # Switched off by a height of 0.
+    off = SafetySupervisor(Safety(mold_exit_height_m=0.0), BOX, R_WU, EYE, 0.5, X_W_mold=mold)
+    octx = off.CreateDefaultContext()
+    cmd, _ = _advance(off, octx, Simulator(off, octx), 2.0, request=ask, pose=in_cavity)[-1]
+    assert np.allclose(cmd, ask, atol=1e-9)
