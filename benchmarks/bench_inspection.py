@@ -1,7 +1,7 @@
 """The inspection task for each out-sample user, through the run CLI itself.
 
     python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
-        [--duration 120] [--jobs 2] [--out DIR]
+        [--duration 120] [--jobs 2] [--out DIR] [--intent [--intent-delay 0.3]]
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 --no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
@@ -12,6 +12,11 @@ the mold walls, the peak workpiece speeds against the scenario's limits, the
 largest joint position and speed over the model's limits, and the safety
 events. The goal: all six faces within 120 s, no mold contact and no limit
 exceeded, for at least 4 of the 5 users.
+
+`--intent` is a reference for the rest of the loop: the policy is replaced by
+the simulated person's own intended twist, delayed (`IntentPolicy`), so the
+table shows what filter, supervisor, IK and arm achieve with a policy that
+reads every gesture right.
 """
 
 from __future__ import annotations
@@ -52,6 +57,34 @@ def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
     return user, done.returncode, done.stderr.strip().splitlines()[-1] if done.returncode else ""
 
 
+def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
+    """The same task with `IntentPolicy` (the person's intended twist, delayed) in place of CCHP."""
+    from pydrake.systems.analysis import Simulator
+
+    from rtcohand_drake.diagram import build_run_diagram, collect_run_log
+    from rtcohand_drake.inspection import measure_inspection, mold_clearance
+    from rtcohand_drake.operator_sim import IntentPolicy, make_builtin_operator
+    from rtcohand_drake.run_log import write_run_log
+    from rtcohand_drake.station import eye_position
+
+    scenario = load_scenario(args.scenario)
+    source, _ = make_builtin_operator(scenario, seed=0, user=user)
+    run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
+                            gesture_source="intent")
+    simulator = Simulator(run.diagram)
+    simulator.AdvanceTo(args.duration)
+    log = collect_run_log(run, simulator.get_context(), scenario)
+    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
+    log.completed, log.faces_inspected, log.completion_time = (
+        result.completed, result.faces_inspected, result.completion_time)
+    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
+    log.extra_attrs.update(mold_touched=bool(clearance <= 0.0), mold_min_clearance_m=clearance)
+    if clearance <= 0.0:
+        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
+    write_run_log(out / f"{user}.h5", log)
+    return user, 0, ""
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", default=None, help="policy file (default: the shipped models/cchp_default.pt)")
@@ -60,6 +93,10 @@ def main() -> int:
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
+    p.add_argument("--intent", action="store_true",
+                   help="reference: replace the policy by the simulated person's intended twist, delayed "
+                        "(rtcohand_drake.operator_sim.IntentPolicy), in this process")
+    p.add_argument("--intent-delay", type=float, default=0.3, help="delay of --intent (s)")
     args = p.parse_args()
     scenario = load_scenario(args.scenario)
     v_lim, w_lim = scenario.safety.max_linear_speed_m_s, scenario.safety.max_angular_speed_rad_s
@@ -67,8 +104,11 @@ def main() -> int:
         out = Path(args.out or tmp)
         out.mkdir(parents=True, exist_ok=True)
         with ThreadPoolExecutor(args.jobs) as pool:
-            results = list(pool.map(lambda u: run_user(u, args, out), args.users))
-        print(f"model: {args.model or 'models/cchp_default.pt'}; limits {v_lim} m/s, {w_lim} rad/s")
+            one = run_user_reference if args.intent else run_user
+            results = list(pool.map(lambda u: one(u, args, out), args.users))
+        policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
+                  else args.model or "models/cchp_default.pt")
+        print(f"policy: {policy}; limits {v_lim} m/s, {w_lim} rad/s")
         print("| user | faces | completion | mold (closest, mm) | peak v (m/s) | peak w (rad/s) "
               "| joint q / v over limit | events |")
         print("|---|---|---|---|---|---|---|---|")

@@ -78,6 +78,9 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         connect(source.GetOutputPort("gesture_features"), policy.GetInputPort("gesture_features"))
         connect(source.GetOutputPort("gesture_features"), supervisor.GetInputPort("gesture_features"))
         connect(supervisor.GetOutputPort("resume_count"), policy.GetInputPort("resume_count"))
+        if policy.HasInputPort("intended_twist") and source.HasOutputPort("intended_twist"):
+            # A reference policy (operator_sim.IntentPolicy) reads what the simulated person means.
+            connect(source.GetOutputPort("intended_twist"), policy.GetInputPort("intended_twist"))
         connect(supervisor.GetOutputPort("resume_count"), command_filter.GetInputPort("resume_count"))
         connect(policy.GetOutputPort("policy_mean"), command_filter.GetInputPort("policy_mean"))
         connect(command_filter.GetOutputPort("twist_request"), supervisor.GetInputPort("twist_request"))

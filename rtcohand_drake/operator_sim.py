@@ -645,3 +645,34 @@ def make_builtin_operator(scenario, seed: int = 0, user: str | None = None,
     X_WU = scenario.cell.user_frame.to_rigid_transform()
     operator = SimulatedOperator(profile, X_WU, eye_position(scenario), config, generator, rate, seed)
     return operator, pieces
+
+
+class IntentPolicy(LeafSystem):
+    """A reference in place of the CCHP policy: the simulated person's intended twist, delayed.
+
+    Not a policy anyone can deploy (a real person's intent is not observable):
+    it measures what the rest of the loop (filter, supervisor, IK, arm) achieves
+    with a policy that reads every gesture right, `delay_s` late. Same ports as
+    `CchpPolicy` plus the input `intended_twist`, which the run diagram wires to
+    the simulated operator's output of that name.
+    """
+
+    def __init__(self, rate_hz: float = 10.0, delay_s: float = 0.3):
+        super().__init__()
+        period = 1.0 / rate_hz
+        self._lag = max(0, int(round(delay_s / period)))
+        self.DeclareVectorInputPort("gesture_features", 36)
+        self.DeclareVectorInputPort("resume_count", 1)
+        self._intent = self.DeclareVectorInputPort("intended_twist", 6)
+        self._buffer = self.DeclareDiscreteState(np.zeros(6 * (self._lag + 1)))  # newest last
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclareVectorOutputPort("policy_mean", 6, self._calc_mean, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort("policy_std", 6, lambda context, out: out.SetFromVector(np.zeros(6)))
+
+    def _update(self, context, discrete_state):
+        buffer = context.get_discrete_state(self._buffer).get_value()
+        intent = np.asarray(self._intent.Eval(context), float)
+        discrete_state.set_value(self._buffer, np.concatenate([buffer[6:], np.nan_to_num(intent)]))
+
+    def _calc_mean(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._buffer).get_value()[:6])

@@ -191,3 +191,24 @@ def test_unknown_user_is_one_line_error(scenario):
         make_builtin_operator(scenario, user="alice")
     message = str(err.value)
     assert "\n" not in message and "alice" in message and "u00" in message and "u14" in message
+
+
+def test_intent_policy_passes_the_intended_twist_on_late():
+    from pydrake.systems.analysis import Simulator
+
+    from rtcohand_drake.operator_sim import IntentPolicy
+
+    policy = IntentPolicy(rate_hz=10.0, delay_s=0.3)
+    ctx = policy.CreateDefaultContext()
+    sim = Simulator(policy, ctx)
+    policy.GetInputPort("gesture_features").FixValue(ctx, np.zeros(36))
+    policy.GetInputPort("resume_count").FixValue(ctx, [0.0])
+    seen = []
+    for k in range(8):
+        policy.GetInputPort("intended_twist").FixValue(ctx, [0.01 * (k + 1), 0, 0, 0, 0, np.nan])
+        sim.AdvanceTo(0.1 * k + 0.05)
+        seen.append(policy.GetOutputPort("policy_mean").Eval(ctx).copy())
+    seen = np.array(seen)
+    # Sampled at t = 0.1 k; read out 3 periods (0.3 s) later; a NaN intent reads as zero.
+    assert np.allclose(seen[3:, 0], 0.01 * np.arange(1, 6)) and np.allclose(seen[:3], 0.0)
+    assert np.all(np.isfinite(seen))
