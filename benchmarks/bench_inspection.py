@@ -62,10 +62,9 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     from pydrake.systems.analysis import Simulator
 
     from rtcohand_drake.diagram import build_run_diagram, collect_run_log
-    from rtcohand_drake.inspection import measure_inspection, mold_clearance
+    from rtcohand_drake.inspection import score_run_log
     from rtcohand_drake.operator_sim import IntentPolicy, make_builtin_operator
     from rtcohand_drake.run_log import write_run_log
-    from rtcohand_drake.station import eye_position
 
     scenario = load_scenario(args.scenario)
     source, _ = make_builtin_operator(scenario, seed=0, user=user)
@@ -74,13 +73,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     simulator = Simulator(run.diagram)
     simulator.AdvanceTo(args.duration)
     log = collect_run_log(run, simulator.get_context(), scenario)
-    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
-    log.completed, log.faces_inspected, log.completion_time = (
-        result.completed, result.faces_inspected, result.completion_time)
-    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
-    log.extra_attrs.update(mold_touched=bool(clearance <= 0.0), mold_min_clearance_m=clearance)
-    if clearance <= 0.0:
-        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
+    score_run_log(log, scenario)
     write_run_log(out / f"{user}.h5", log)
     return user, 0, ""
 

@@ -115,3 +115,23 @@ def mold_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 
                 if d < 0.05 and d < best:
                     best, when = float(d), float(times[k])
     return best, when
+
+
+def score_run_log(log, scenario) -> tuple[float, float]:
+    """Fills a run log's task results: faces inspected, completion, and mold contact.
+
+    Sets `completed`, `faces_inspected`, `completion_time`, the extra attributes
+    `mold_touched` and `mold_min_clearance_m`, and a `mold_contact` event when
+    the part touched the walls. Returns (closest distance to the walls, its time).
+    """
+    from rtcohand_drake.station import eye_position
+
+    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
+    log.completed, log.faces_inspected, log.completion_time = (
+        result.completed, result.faces_inspected, result.completion_time)
+    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
+    log.extra_attrs.update(mold_touched=bool(clearance <= 0.0), mold_min_clearance_m=clearance)
+    if clearance <= 0.0:
+        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
+        log.events.sort(key=lambda e: e.time)
+    return clearance, clearance_t

@@ -183,9 +183,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from pydrake.systems.analysis import Simulator
 
     from rtcohand_drake.diagram import collect_run_log, peak_speeds
-    from rtcohand_drake.inspection import measure_inspection
+    from rtcohand_drake.inspection import score_run_log
     from rtcohand_drake.run_log import write_run_log
-    from rtcohand_drake.station import eye_position
 
     meshcat = None
     if not args.no_meshcat:
@@ -232,18 +231,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     log = collect_run_log(run, root, scenario)
     if station is not None:
         log.events = sorted(log.events + station.events, key=lambda e: e.time)
-    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario))
-    log.completed, log.faces_inspected, log.completion_time = (
-        result.completed, result.faces_inspected, result.completion_time)
-    from rtcohand_drake.inspection import mold_clearance
-
-    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
+    clearance, clearance_t = score_run_log(log, scenario)
     log.extra_attrs.update(seed=args.seed, sim_duration_s=sim_time, interrupted=interrupted,
-                           filter_mode=scenario.command_filter.mode, mold_touched=bool(clearance <= 0.0),
-                           mold_min_clearance_m=clearance)
-    if clearance <= 0.0:
-        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
-        log.events.sort(key=lambda e: e.time)
+                           filter_mode=scenario.command_filter.mode)
     if fault is not None:
         log.add_event(sim_time, "fault", str(fault))
         log.completed = False

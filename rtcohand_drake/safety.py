@@ -88,7 +88,7 @@ class SafetySupervisor(LeafSystem):
         self._cfg = config
         # The mold's frame (origin: centre of the cavity floor, z up out of the cavity), or None.
         self._X_mold_W = None if X_W_mold is None else X_W_mold.inverse()
-        self._R_W_mold = None if X_W_mold is None else X_W_mold.rotation().matrix()
+        self._mold_axis_W = None if X_W_mold is None else X_W_mold.rotation().matrix()[:, 2]
         self._box_lo = np.asarray(workspace.min_xyz, float)
         self._box_hi = np.asarray(workspace.max_xyz, float)
         self._R_WU = np.asarray(R_WU, float)
@@ -111,23 +111,25 @@ class SafetySupervisor(LeafSystem):
 
     # --- the rules, each a small pure function of numbers -------------------------
 
-    def in_mold_exit(self, p_W: np.ndarray) -> bool:
-        """True while the workpiece centre is over the cavity and below the exit height."""
+    def _mold_exit_position(self, p_W: np.ndarray) -> np.ndarray | None:
+        """The workpiece centre in the mold frame while it is in the exit corridor, else None."""
         if self._X_mold_W is None or self._cfg.mold_exit_height_m <= 0.0:
-            return False
+            return None
         p = self._X_mold_W.multiply(p_W)
         margin = self._cfg.mold_exit_margin_m
-        return bool(abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
-                    and p[2] < self._cfg.mold_exit_height_m)
+        inside = (abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
+                  and p[2] < self._cfg.mold_exit_height_m)
+        return p if inside else None
 
     def limit_to_mold_exit(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
         """In the mold's exit corridor only motion along the mold's axis passes: no turn, no sideways move."""
-        if not self.in_mold_exit(p_W):
+        p_mold = self._mold_exit_position(p_W)
+        if p_mold is None:
             return twist_U, Intervention.NONE
-        axis_W = self._R_W_mold[:, 2]
+        axis_W = self._mold_axis_W
         v_W = self._R_WU @ twist_U[:3]
         along = float(v_W @ axis_W)
-        if along < 0.0 and self._X_mold_W.multiply(p_W)[2] <= self._cfg.mold_seat_height_m:
+        if along < 0.0 and p_mold[2] <= self._cfg.mold_seat_height_m:
             along = 0.0  # seated: pressing the part into the cavity floor only tilts it
         out = np.zeros(6)
         out[:3] = self._R_WU.T @ (axis_W * along)
