@@ -1,7 +1,10 @@
 """Evaluate trained policies on the six test settings of the paper (contracts §3).
 
     python -m rtcohand_drake.evaluate --data PATH.h5 --checkpoint CKPT [CKPT ...] --out DIR
-        [--names NAME ...] [--seed 0] [--noise-sweep] [--spectrum] [--attention]
+        [--names NAME ...] [--seed 0] [--settings S ...] [--noise-sweep] [--spectrum] [--attention]
+
+`--settings ... Own` adds the deployed setting (out-sample targets, the
+user's own other clips as context; `rtcohand_drake.data.sampling`).
 
 Checkpoints that share a name (by default derived from the model kind and its
 training options, e.g. "CCHP", "CCHP p_TF=0.9", "RANP", "Dummy LSTM") are
@@ -34,9 +37,9 @@ import torch
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.model.batching import collate
+from rtcohand_drake.data.sampling import ALL_SETTINGS, SETTINGS
 from rtcohand_drake.model.checkpoint import load_checkpoint
 
-SETTINGS = ("D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy")
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
 MAX_SIGMA_T = 0.05  # m/s
 MAX_SIGMA_R = 0.1  # rad/s
@@ -173,17 +176,18 @@ def markdown_report(results: Dict) -> str:
              f"Data: `{results['data']}`. Episode seed {results['seed']}. "
              "Cells: ELBO loss (per target clip; NLL for the Dummy LSTM) / MSE (per step and dimension, "
              "(m/s)² and (rad/s)²), mean ± std over training seeds.", ""]
-    header = "| Model | seeds | " + " | ".join(SETTINGS) + " |"
-    lines += [header, "|" + "---|" * (len(SETTINGS) + 2)]
+    shown = results.get("settings") or list(SETTINGS)
+    header = "| Model | seeds | " + " | ".join(shown) + " |"
+    lines += [header, "|" + "---|" * (len(shown) + 2)]
     for name, entry in results["models"].items():
-        cells = [_cell(entry["settings"].get(s, {})) for s in SETTINGS]
+        cells = [_cell(entry["settings"].get(s, {})) for s in shown]
         lines.append(f"| {name} | {entry['seeds']} | " + " | ".join(cells) + " |")
     zero = results.get("reference", {}).get("zero_twist_mse", {})
     if zero:
         lines.append("| zero twist (reference) | - | " + " | ".join(
-            "n/a" if zero.get(s) is None else f"n/a / {zero[s]:.4g}" for s in SETTINGS) + " |")
+            "n/a" if zero.get(s) is None else f"n/a / {zero[s]:.4g}" for s in shown) + " |")
     lines += ["", "Episodes per setting: " + ", ".join(
-        f"{s} {results['episodes'].get(s, 0)}" for s in SETTINGS), ""]
+        f"{s} {results['episodes'].get(s, 0)}" for s in shown), ""]
     lines += ["## The paper's values (its real data; compare the ordering, not the numbers)", "",
               "| Model | " + " | ".join(SETTINGS) + " |", "|" + "---|" * (len(SETTINGS) + 1)]
     for name, row in PAPER_TABLE.items():
@@ -402,7 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--names", nargs="+", default=None, help="model names, one per checkpoint")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the evaluation episodes and noise")
-    p.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS))
+    p.add_argument("--settings", nargs="+", choices=ALL_SETTINGS, default=list(SETTINGS),
+                   help="the paper's six by default; 'Own' is the deployed setting (the user's own clips as context)")
     p.add_argument("--noise-sweep", action="store_true", help="11 noise levels on D+U+ (noise_sweep.png)")
     p.add_argument("--spectrum", action="store_true", help="spectrum of predictions at three noise levels")
     p.add_argument("--attention", action="store_true", help="attention heatmap of the first CCHP checkpoint")

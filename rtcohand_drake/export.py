@@ -9,8 +9,9 @@
     step(x_t [36], y_prev [6], h [H], c [H], keys [K, D], values [K, 6], z [Dz])
         -> (mean [6], std [6], h [H], c [H], attention [K] (one head) or [heads, K])
 
-and the integer attributes feature_dim (36), hidden_size (H), latent_dim (Dz),
-attention_heads and key_size. Inputs and outputs are in physical units
+and the integer attributes feature_dim (36), hidden_size (H: the size of the
+recurrent state h and c, which includes the gesture cell's state when the
+attention keys come from one), latent_dim (Dz), attention_heads and key_size. Inputs and outputs are in physical units
 (features as the hand-feature module gives them, twists in m/s and rad/s);
 NaN features (hand lost) are read as zeros. K is the number of True entries of
 `mask`: each context piece (row of x_c) is encoded from a zero state, and the
@@ -49,18 +50,24 @@ class CchpPolicy(nn.Module):
         cfg = model.cfg
         self.feature_dim = FEATURE_DIM
         self.motion_dim = MOTION_DIM
-        self.hidden_size = cfg.hidden_size
+        self.hidden_size = cfg.state_size  # h and c carry the gesture cell's state too, when there is one
+        self.cell_size = cfg.hidden_size
+        self.key_offset = model.attention.key_offset
         self.latent_dim = cfg.latent_dim
         self.attention_heads = cfg.attention_heads
         self.key_size = cfg.key_size
         self.std_min = float(cfg.std_min)
         self.latent_std_min = float(cfg.latent_std_min)
-        self.key_scale = 1.0 / math.sqrt(cfg.key_size)
+        self.distance_kernel = cfg.attention_kernel == "distance"
+        self.key_scale = 1.0 if self.distance_kernel else 1.0 / math.sqrt(cfg.key_size)
         self.register_buffer("feature_scale", model.normalizer.feature_scale.detach().clone())
         self.register_buffer("label_scale", model.normalizer.label_scale.detach().clone())
         self.fingers = model.cell.fingers.net
         self.hand = model.cell.hand
         self.lstm = model.cell.lstm
+        self.has_gesture_cell = model.cell.gesture is not None
+        # A 1-unit placeholder when there is no gesture cell, so the scripted module has one type; never run.
+        self.gesture = model.cell.gesture if model.cell.gesture is not None else nn.LSTMCell(1, 1)
         self.aggregate = model.latent.aggregate
         self.trunk = model.latent.trunk
         self.mu_head = model.latent.mu_head
@@ -72,8 +79,14 @@ class CchpPolicy(nn.Module):
 
     def _cell(self, finger_feat: torch.Tensor, y_prev_n: torch.Tensor, h: torch.Tensor, c: torch.Tensor
               ) -> Tuple[torch.Tensor, torch.Tensor]:
-        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h], 1)))
-        h2, c2 = self.lstm(torch.cat([hand_feat, y_prev_n], 1), (h, c))
+        n = self.cell_size
+        h_main = h[:, :n]
+        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h_main], 1)))
+        h2, c2 = self.lstm(torch.cat([hand_feat, y_prev_n], 1), (h_main, c[:, :n]))
+        if self.has_gesture_cell:
+            g, cg = self.gesture(finger_feat, (h[:, n:], c[:, n:]))
+            h2 = torch.cat([h2, g], 1)
+            c2 = torch.cat([c2, cg], 1)
         return h2, c2
 
     @torch.jit.export
@@ -103,7 +116,7 @@ class CchpPolicy(nn.Module):
             y_prev = y[:, t]
         h_all = torch.stack(hs, 1)[mask]  # (K, H)
         y_valid = y[mask]  # (K, 6), normalised
-        keys = self.kq(h_all) * self.key_scale  # (K, heads * key_size)
+        keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
         g = self.trunk(s)
         z_mu = self.mu_head(g)[0]
@@ -118,8 +131,12 @@ class CchpPolicy(nn.Module):
         x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
         finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
         h2, c2 = self._cell(finger_feat, (y_prev / self.label_scale).view(1, -1), h.view(1, -1), c.view(1, -1))
-        q = self.kq(h2)  # (1, heads * key_size)
-        if self.attention_heads == 1:
+        q = self.kq(h2[:, self.key_offset:])  # (1, heads * key_size)
+        if self.distance_kernel:
+            k = keys.size(0)
+            diff = keys.view(k, self.attention_heads, self.key_size) - q.view(1, self.attention_heads, self.key_size)
+            scores = -(diff * diff).sum(2).t()  # (heads, K)
+        elif self.attention_heads == 1:
             scores = torch.mm(q, keys.t())  # (1, K)
         else:
             k = keys.size(0)

@@ -51,6 +51,7 @@ class TrainConfig:
     p_d: float = 0.5  # probability that the chosen context clip has the target's active dimensions
     p_u: float = 0.5  # probability that it comes from the target's user
     n_random: int = 2  # further random context clips per target
+    n_user: int = 0  # further context clips from the target's own user (0: the paper's sampler)
     t_min: int = 10  # minimum length of a context slice cut from the target itself
     p_cxt: float = 0.5  # that slice ends within this fraction of the target
     # Input noise N(0, 1e-6) read as a variance: std 1e-3, in the features' units.
@@ -58,6 +59,8 @@ class TrainConfig:
     # 0: the paper's plain -ELBO. 1.0: beta-NLL weighting (see likelihood_terms), which
     # fits the mean far faster at a CPU budget; the reported ELBO loss is always plain.
     nll_beta: float = 1.0
+    # CCHP only: weight of the context-read loss (cchp_elbo's readout_weight); 0: the paper's objective.
+    readout_weight: float = 0.0
     rate_hz: float = 10.0
     checkpoint_every: int = 500
     validate_every: int = 250
@@ -131,7 +134,8 @@ def make_batch(targets: Sequence, pool: Sequence, rng: np.random.Generator, cfg:
     from rtcohand_drake.data.sampling import sample_context
 
     contexts = [
-        sample_context(t, pool, rng, p_d=cfg.p_d, p_u=cfg.p_u, n_random=cfg.n_random, t_min=cfg.t_min, p_cxt=cfg.p_cxt)
+        sample_context(t, pool, rng, p_d=cfg.p_d, p_u=cfg.p_u, n_random=cfg.n_random, t_min=cfg.t_min, p_cxt=cfg.p_cxt,
+                       n_user=cfg.n_user)
         for t in targets
     ]
     return collate([(t.features, t.labels) for t in targets], contexts)
@@ -219,8 +223,9 @@ def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = 
         batch = make_batch(targets, train_clips, context_rng, cfg).to(device)
         p_tf = cfg.p_tf(step)
         net.train()
+        extra = {"readout_weight": cfg.readout_weight} if cfg.readout_weight > 0.0 else {}
         terms = net(batch, p_tf=p_tf, sample_posterior=True, generator=generator, x_noise_std=cfg.x_noise_std,
-                    nll_beta=cfg.nll_beta)
+                    nll_beta=cfg.nll_beta, **extra)
         optimizer.zero_grad(set_to_none=True)
         terms["loss"].backward()
         optimizer.step()
@@ -351,11 +356,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--p-d", type=float, default=d.p_d)
     p.add_argument("--p-u", type=float, default=d.p_u)
     p.add_argument("--n-random", type=int, default=d.n_random)
+    p.add_argument("--n-user", type=int, default=d.n_user,
+                   help="further context clips from the target's own user, as in deployment (0: the paper's sampler)")
     p.add_argument("--t-min", type=int, default=d.t_min)
     p.add_argument("--p-cxt", type=float, default=d.p_cxt)
     p.add_argument("--x-noise-std", type=float, default=d.x_noise_std)
     p.add_argument("--nll-beta", type=float, default=d.nll_beta,
                    help="0: the paper's plain -ELBO; >0: beta-NLL weighting of the likelihood term")
+    p.add_argument("--readout-weight", type=float, default=d.readout_weight,
+                   help="CCHP: weight of a loss on the context read r(t) itself predicting the twist (0: off)")
     p.add_argument("--rate-hz", type=float, default=d.rate_hz)
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
     p.add_argument("--validate-every", type=int, default=d.validate_every)
@@ -376,6 +385,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for name in ("p_d", "p_u", "p_cxt"):
         if not 0.0 <= getattr(args, name) <= 1.0:
             raise InputError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(args, name)}")
+    if args.readout_weight < 0.0 or (args.readout_weight > 0.0 and args.model != "cchp"):
+        raise InputError(f"--readout-weight must be >= 0 and is for --model cchp only, got {args.readout_weight} "
+                         f"with --model {args.model}")
     model_config = None
     if args.model_config:
         try:

@@ -29,10 +29,11 @@ def _batch(seed=0, b=3):
 
 def _models():
     return [Cchp(CchpConfig(**SMALL)), Cchp(CchpConfig(**SMALL, attention_heads=6)),
+            Cchp(CchpConfig(**SMALL, key_source="gesture", gesture_hidden_size=8)),
             Ranp(RanpConfig(**SMALL, window=4)), DummyLstm()]
 
 
-@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "ranp", "lstm"])
+@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "cchp_gesture_keys", "ranp", "lstm"])
 def test_forward_backward_and_predict(model):
     torch.manual_seed(0)
     targets, contexts = _batch()
@@ -65,7 +66,7 @@ def test_kl_of_identical_gaussians_is_zero():
     assert torch.all(gaussian_kl(mu + 1, sigma, mu, sigma) > 0)
 
 
-@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "ranp", "lstm"])
+@pytest.mark.parametrize("model", _models(), ids=["cchp", "cchp6", "cchp_gesture_keys", "ranp", "lstm"])
 def test_padding_does_not_change_a_clip(model):
     """A target batched with longer targets and contexts gets the same prediction as alone."""
     model.eval()
@@ -157,3 +158,42 @@ def test_beta_nll_changes_the_objective_not_the_reported_elbo():
     assert torch.allclose(plain["elbo_loss"], beta["elbo_loss"])
     assert torch.allclose(plain["loss"], plain["elbo_loss"])
     assert not torch.allclose(beta["loss"], beta["elbo_loss"])
+
+
+def test_gesture_keys_do_not_see_the_labels():
+    """With "gesture" keys, the context's keys depend on its hand motion only:
+    changing the context labels changes the values and the latent, not the keys."""
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(**SMALL, key_source="gesture", gesture_hidden_size=8)).eval()
+    targets, contexts = _batch()
+    relabelled = [[(x, -2.0 * y) for x, y in c] for c in contexts]
+    a, _ = model.encode_context(collate(targets, contexts))
+    b, _ = model.encode_context(collate(targets, relabelled))
+    assert torch.equal(a.keys, b.keys)
+    assert not torch.allclose(a.values, b.values)
+    state = Cchp(CchpConfig(**SMALL)).eval()  # the paper's keys read h, which is fed the labels
+    a, _ = state.encode_context(collate(targets, contexts))
+    b, _ = state.encode_context(collate(targets, relabelled))
+    assert not torch.allclose(a.keys, b.keys)
+
+
+@pytest.mark.parametrize("heads", [1, 6])
+def test_readout_loss_is_the_context_read_error(heads):
+    """The readout term adds weight * 0.5 * sum_t |r(t) - y(t)|^2 to the loss and
+    nothing to the ELBO; its gradient reaches the attention's projection."""
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(**SMALL, key_source="gesture", gesture_hidden_size=8, attention_heads=heads))
+    batch = collate(*_batch())
+
+    def terms(w):
+        return model(batch, p_tf=1.0, sample_posterior=False, readout_weight=w)
+
+    plain, with_read = terms(0.0), terms(2.0)
+    assert "readout_mse" not in plain and with_read["readout_mse"] > 0
+    assert torch.allclose(plain["elbo_loss"], with_read["elbo_loss"])
+    steps_per_clip = batch.mask.sum() / batch.mask.shape[0]
+    expected = plain["loss"] + 2.0 * 0.5 * with_read["readout_mse"] * 6 * steps_per_clip
+    assert torch.allclose(with_read["loss"], expected, rtol=1e-4)
+    model.zero_grad()
+    (with_read["loss"] - plain["loss"]).backward()
+    assert model.attention.kq.weight.grad.abs().sum() > 0

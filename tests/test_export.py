@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from rtcohand_drake.export import export_checkpoint, load_policy, script_policy
+from rtcohand_drake.export import load_policy, script_policy
 from rtcohand_drake.model.batching import collate, collate_context
 from rtcohand_drake.model.cchp import Cchp, CchpConfig
 from rtcohand_drake.model.checkpoint import CheckpointError, save_checkpoint
@@ -21,9 +21,9 @@ def _clip(rng, n):
     return rng.normal(size=(n, 36)).astype(np.float32) * 0.3, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
 
 
-def _model(heads=1):
+def _model(heads=1, key_source="state", kernel="dot"):
     torch.manual_seed(0)
-    model = Cchp(CchpConfig(attention_heads=heads)).eval()
+    model = Cchp(CchpConfig(attention_heads=heads, key_source=key_source, attention_kernel=kernel)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     return model
 
@@ -45,9 +45,10 @@ def _run_policy(policy, target_x, context, z=None):
     return torch.stack(means), atts, (keys, values, z_mu, z_sigma)
 
 
-@pytest.mark.parametrize("heads", [1, 6])
-def test_whole_clip_matches_python_model(tmp_path, heads):
-    model = _model(heads)
+@pytest.mark.parametrize("heads,key_source,kernel", [(1, "state", "dot"), (6, "state", "dot"), (1, "gesture", "dot"),
+                                                     (1, "gesture", "distance"), (6, "gesture", "distance")])
+def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel):
+    model = _model(heads, key_source, kernel)
     rng = np.random.default_rng(heads)
     target = _clip(rng, 45)
     context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]
@@ -63,7 +64,8 @@ def test_whole_clip_matches_python_model(tmp_path, heads):
     assert torch.all(z_sigma > 0)
     assert atts[0].shape == ((k,) if heads == 1 else (heads, k))
     assert torch.allclose(atts[0].sum(-1), torch.ones(()), atol=1e-5)
-    assert policy.feature_dim == 36 and policy.hidden_size == 128 and policy.latent_dim == 32
+    assert policy.feature_dim == 36 and policy.latent_dim == 32
+    assert policy.hidden_size == 128 + (model.cfg.gesture_hidden_size if key_source == "gesture" else 0)
     assert torch.allclose(values, torch.from_numpy(np.concatenate([p[1] for p in context])))
 
 

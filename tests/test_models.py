@@ -14,7 +14,6 @@ from pydrake.geometry import Role
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
-from pydrake.multibody.tree import JointIndex
 from pydrake.systems.framework import DiagramBuilder
 
 from rtcohand_drake import model_files

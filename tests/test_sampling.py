@@ -56,6 +56,25 @@ def test_sample_context_follows_wishes(pcs):
                 assert other is not None and other is not target and other is not chosen
 
 
+def test_sample_context_adds_clips_of_the_target_user(pcs):
+    train, _, _ = split_sets(pcs)
+    target = train[0]
+    own = [c for c in train if c.user == target.user and c is not target]
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        pieces = sample_context(target, train, rng, p_d=0.0, p_u=0.0, n_user=5, n_random=2)
+        assert len(pieces) == 8
+        chosen = by_identity(train, pieces[0])
+        assert chosen is not None and chosen.user != target.user
+        picked = [by_identity(train, p) for p in pieces[1:]]
+        assert all(c is not None and c is not target and c is not chosen for c in picked)
+        assert all(c.user == target.user for c in picked[:5])
+        assert len({id(c) for c in picked}) == 7  # without replacement, across both draws
+    # A user with fewer clips than asked gives what there is.
+    pieces = sample_context(target, train, rng, p_d=0.0, p_u=0.0, n_user=len(own) + 10, n_random=0)
+    assert len(pieces) == 1 + len(own)
+
+
 def test_target_slice_bounds():
     T = 40
     feats = np.arange(T * 36, dtype=np.float32).reshape(T, 36)
@@ -118,6 +137,16 @@ def test_evaluation_rules(pcs, setting):
         assert len(eps) == len(test_in)
     if setting == "Unseen":
         assert len(eps) == len(test_out)
+
+
+def test_own_setting_gives_the_users_other_clips(pcs):
+    _, _, test_out = split_sets(pcs)
+    episodes = evaluation_episodes(pcs, "Own", seed=0)
+    assert len(episodes) == len(test_out) == 72
+    for e in episodes[:10]:
+        assert e.target.group == "out-sample" and len(e.context) == 71
+        ctx = [by_identity(test_out, p) for p in e.context]
+        assert all(c is not None and c.user == e.target.user and c is not e.target for c in ctx)
 
 
 def test_evaluation_is_deterministic(pcs):

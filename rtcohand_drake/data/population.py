@@ -48,7 +48,7 @@ Every number is a field of :class:`GeneratorConfig`, with its unit.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np

@@ -21,8 +21,12 @@ For a target clip and a pool (the training clips):
    it is used, with ``K >= t_min`` and ``t0 + K <= p_cxt * len(target)``
    (K and t0 uniform over the allowed values; when ``p_cxt * len < t_min``
    the slice is the first ``floor(p_cxt * len)`` steps, at least one).
-4. ``n_random`` more clips are drawn uniformly, without replacement, from the
-   labelled pool clips other than the target and the chosen clip.
+4. ``n_user`` more clips (default 0) are drawn uniformly, without
+   replacement, from the target user's labelled pool clips other than the
+   target and the chosen clip (fewer if the user has fewer). This matches
+   deployment, where the context is the user's own clips.
+5. ``n_random`` more clips are drawn uniformly, without replacement, from the
+   labelled pool clips other than the target and the clips already chosen.
 
 Evaluation (:func:`evaluation_episodes`)
 ----------------------------------------
@@ -46,7 +50,14 @@ clips from ``D_train``:
   target's linear-velocity entries and sigma_R = 0.025 rad/s on its
   angular-velocity entries; the context stays clean.
 
-In every setting the two random clips are drawn uniformly from the D_train
+One more setting is not in the paper and not in the default six:
+
+- ``Own``: the deployed setting. Target from D_test,out; the context is every
+  other labelled clip of the target's user (all whole clips; for an
+  out-sample user, the rest of their 72), no random clips. This is what the
+  run CLI gives the policy for the built-in operator.
+
+In every paper setting the two random clips are drawn uniformly from the D_train
 clips other than the chosen one (any user). A target with no clip matching
 its setting's rule for the chosen clip is left out (so a file with no
 out-sample users gives no Unseen episodes, and a target whose pair of
@@ -68,6 +79,8 @@ from rtcohand_drake.hand_features import FEATURE_DIM, PARTS
 SETTINGS = ("D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy")
 NOISY_SIGMA_T = 0.05  # m/s, on linear-velocity entries
 NOISY_SIGMA_R = 0.025  # rad/s, on angular-velocity entries
+OWN_SETTING = "Own"  # the deployed setting (module docstring); not one of the paper's six
+ALL_SETTINGS = SETTINGS + (OWN_SETTING,)
 EVAL_RANDOM_CLIPS = 2
 
 Piece = tuple[np.ndarray, np.ndarray]  # (features (K, 36) float32, labels (K, 6) float32)
@@ -116,6 +129,7 @@ def sample_context(
     n_random: int = 2,
     t_min: int = 10,
     p_cxt: float = 0.5,
+    n_user: int = 0,
 ) -> list[Piece]:
     """Context pieces for one training target (rules in the module docstring)."""
     index = _pool_index(pool)
@@ -142,7 +156,14 @@ def sample_context(
         pieces = [_whole(chosen)]
     not_target = ~((index.users == target.user) & (index.clip_ids == target.clip_id))
     not_chosen = ~((index.users == chosen.user) & (index.clip_ids == chosen.clip_id))
-    others = np.flatnonzero(not_target & not_chosen)
+    free = not_target & not_chosen
+    if n_user > 0:
+        own = np.flatnonzero(free & (index.users == target.user))
+        if len(own):
+            pick = own[rng.choice(len(own), size=min(n_user, len(own)), replace=False)]
+            pieces.extend(_whole(labelled[int(i)]) for i in pick)
+            free[pick] = False
+    others = np.flatnonzero(free)
     if len(others) and n_random > 0:
         pick = rng.choice(len(others), size=min(n_random, len(others)), replace=False)
         pieces.extend(_whole(labelled[others[int(i)]]) for i in pick)
@@ -273,10 +294,17 @@ def evaluation_episodes(clips: Sequence[PolicyClip], setting: str, seed: int) ->
     Works on any contract-conforming file: settings with no eligible target
     (e.g. Unseen with no out-sample users) give an empty list.
     """
-    if setting not in SETTINGS:
-        raise ValueError(f"unknown setting {setting!r}; expected one of {', '.join(SETTINGS)}")
-    rng = np.random.default_rng([int(seed), SETTINGS.index(setting)])
+    if setting not in ALL_SETTINGS:
+        raise ValueError(f"unknown setting {setting!r}; expected one of {', '.join(ALL_SETTINGS)}")
+    rng = np.random.default_rng([int(seed), ALL_SETTINGS.index(setting)])
     train, test_in, test_out = split_sets(clips)
+    if setting == OWN_SETTING:
+        return [
+            Episode(target=t, context=[_whole(c) for c in test_out if c.user == t.user and not _same(c, t)],
+                    setting=setting, chosen="")
+            for t in test_out
+            if any(c.user == t.user and not _same(c, t) for c in test_out)
+        ]
     targets_from, want_d, want_u = _RULES[setting]
     targets = test_in if targets_from == "in" else test_out
     noise = (NOISY_SIGMA_T, NOISY_SIGMA_R) if setting == "Noisy" else (0.0, 0.0)

@@ -44,12 +44,34 @@ class CchpConfig:
     latent_dim: int = 32  # D_z
     key_size: int = 32  # f_kq output
     attention_heads: int = 1  # 1, or 6 (one head per motion dimension)
+    # What the attention's keys and query are computed from: "state", the
+    # encoder cell's hidden state h (paper), or "gesture", the state of a
+    # second LSTM cell that sees the hand features only. The cell's state h
+    # is fed the labels (true ones in the context, the model's own in the
+    # target), so "state" keys can match on the previous label rather than
+    # on the gesture; "gesture" keys compare the two hand motions alone.
+    key_source: str = "state"
+    gesture_hidden_size: int = 64  # G, the gesture cell's state ("gesture" keys only)
+    # Attention scores: "dot", q.k / sqrt(key_size) (paper), or "distance",
+    # -|q - k|^2: a Gaussian kernel on the projected states, which learns to
+    # pick out the context steps nearest to the query much sooner.
+    attention_kernel: str = "dot"
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
 
     def to_dict(self) -> Dict:
         return asdict(self)
+
+    @property
+    def gesture_size(self) -> int:
+        """Size of the gesture cell's state (0 without one)."""
+        return self.gesture_hidden_size if self.key_source == "gesture" else 0
+
+    @property
+    def state_size(self) -> int:
+        """Size of the recurrent state the decoder carries: h, then the gesture cell's state."""
+        return self.hidden_size + self.gesture_size
 
 
 class FingerFeatures(nn.Module):
@@ -71,20 +93,30 @@ class EncoderCell(nn.Module):
     f_hand sees the part features and h(t-1); the LSTM cell sees the hand
     feature and y(t-1). The finger features do not depend on the recurrence,
     so callers compute them for all steps at once with `fingers`.
+
+    With "gesture" keys a second LSTM cell runs on the finger features alone;
+    its state is appended to h and c, so the state is (.., H + G).
     """
 
     def __init__(self, cfg: CchpConfig):
         super().__init__()
+        self.hidden_size = cfg.hidden_size
         self.fingers = FingerFeatures(cfg)
         self.hand = mlp([self.fingers.out_size + cfg.hidden_size] + list(cfg.hand_hidden) + [cfg.hand_feature_size])
         self.lstm = nn.LSTMCell(cfg.hand_feature_size + MOTION_DIM, cfg.hidden_size)
+        self.gesture = nn.LSTMCell(self.fingers.out_size, cfg.gesture_size) if cfg.gesture_size else None
 
     def forward(
         self, finger_feat: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor
     ) -> Tuple[torch.Tensor, torch.Tensor]:
-        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h], -1)))
-        h, c = self.lstm(torch.cat([hand_feat, y_prev], -1), (h, c))
-        return h, c
+        n = self.hidden_size
+        h_main = h[..., :n]
+        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h_main], -1)))
+        h_new, c_new = self.lstm(torch.cat([hand_feat, y_prev], -1), (h_main, c[..., :n]))
+        if self.gesture is None:
+            return h_new, c_new
+        g, cg = self.gesture(finger_feat, (h[..., n:], c[..., n:]))
+        return torch.cat([h_new, g], -1), torch.cat([c_new, cg], -1)
 
 
 class LatentEncoder(nn.Module):
@@ -96,7 +128,7 @@ class LatentEncoder(nn.Module):
 
     def __init__(self, cfg: CchpConfig):
         super().__init__()
-        self.aggregate = mlp([cfg.hidden_size + MOTION_DIM] + list(cfg.aggregate_sizes))
+        self.aggregate = mlp([cfg.state_size + MOTION_DIM] + list(cfg.aggregate_sizes))
         self.trunk = nn.Sequential(mlp([cfg.aggregate_sizes[-1]] + list(cfg.latent_trunk_sizes)), nn.ReLU())
         self.mu_head = nn.Linear(cfg.latent_trunk_sizes[-1], cfg.latent_dim)
         self.sigma_head = nn.Linear(cfg.latent_trunk_sizes[-1], cfg.latent_dim)
@@ -114,20 +146,26 @@ class LatentEncoder(nn.Module):
 class ContextAttention(nn.Module):
     """Dot-product attention of a target hidden state over context hidden states.
 
-    f_kq maps keys (context h) and the query (target h) to the same space;
-    the values are the context velocities. Keys are projected once per context
-    (`project_keys`) and scaled by 1/sqrt(key_size).
+    f_kq maps keys (context states) and the query (target state) to the same
+    space; the values are the context velocities. Keys are projected once per
+    context (`project_keys`), for "dot" scores scaled by 1/sqrt(key_size). f_kq reads the
+    state from `key_offset` on: all of h ("state" keys) or the gesture cell's
+    part ("gesture" keys).
     """
 
     def __init__(self, cfg: CchpConfig):
         super().__init__()
         self.heads = cfg.attention_heads
         self.key_size = cfg.key_size
-        self.kq = nn.Linear(cfg.hidden_size, cfg.attention_heads * cfg.key_size)
+        self.key_offset = cfg.hidden_size if cfg.gesture_size else 0
+        self.distance = cfg.attention_kernel == "distance"
+        self.kq = nn.Linear(cfg.state_size - self.key_offset, cfg.attention_heads * cfg.key_size)
 
     def project_keys(self, h_c: torch.Tensor) -> torch.Tensor:
-        """(..., K, H) -> (..., heads, K, key_size)."""
-        k = self.kq(h_c) / math.sqrt(self.key_size)
+        """(..., K, state) -> (..., heads, K, key_size)."""
+        k = self.kq(h_c[..., self.key_offset:])
+        if not self.distance:
+            k = k / math.sqrt(self.key_size)
         k = k.reshape(h_c.shape[:-1] + (self.heads, self.key_size))
         return k.movedim(-2, -3)
 
@@ -138,8 +176,11 @@ class ContextAttention(nn.Module):
 
         Returns r (B, heads, 6) and the weights (B, heads, K).
         """
-        q = self.kq(h_t).reshape(h_t.shape[0], self.heads, self.key_size, 1)
-        scores = torch.matmul(keys, q).squeeze(-1)  # (B, heads, K)
+        q = self.kq(h_t[..., self.key_offset:]).reshape(h_t.shape[0], self.heads, self.key_size, 1)
+        if self.distance:
+            scores = -((keys - q.transpose(-1, -2)) ** 2).sum(-1)  # (B, heads, K)
+        else:
+            scores = torch.matmul(keys, q).squeeze(-1)  # (B, heads, K)
         scores = scores.masked_fill(~key_mask.unsqueeze(1), float("-inf"))
         weights = torch.softmax(scores, -1)
         return torch.matmul(weights, values), weights
@@ -151,7 +192,7 @@ class OutputHeads(nn.Module):
     def __init__(self, cfg: CchpConfig):
         super().__init__()
         self.heads = cfg.attention_heads
-        in_size = MOTION_DIM + cfg.hidden_size + cfg.latent_dim
+        in_size = MOTION_DIM + cfg.state_size + cfg.latent_dim
         self.net = PerDimensionMLP(MOTION_DIM, [in_size] + list(cfg.output_hidden) + [2])
         self.std_min = cfg.std_min
 
@@ -186,6 +227,10 @@ class Cchp(nn.Module):
         self.cfg = cfg or CchpConfig()
         if self.cfg.attention_heads not in (1, MOTION_DIM):
             raise ValueError(f"attention_heads must be 1 or {MOTION_DIM}, got {self.cfg.attention_heads}")
+        if self.cfg.attention_kernel not in ("dot", "distance"):
+            raise ValueError(f"attention_kernel must be 'dot' or 'distance', got {self.cfg.attention_kernel!r}")
+        if self.cfg.key_source not in ("state", "gesture"):
+            raise ValueError(f"key_source must be 'state' or 'gesture', got {self.cfg.key_source!r}")
         self.normalizer = Normalizer()
         self.cell = EncoderCell(self.cfg)
         self.latent = LatentEncoder(self.cfg)
@@ -202,8 +247,8 @@ class Cchp(nn.Module):
         n, t_len, _ = x.shape
         fingers = self.cell.fingers(x)
         y_prev = torch.cat([y.new_zeros(n, 1, MOTION_DIM), y[:, :-1]], 1)
-        h = x.new_zeros(n, self.cfg.hidden_size)
-        c = x.new_zeros(n, self.cfg.hidden_size)
+        h = x.new_zeros(n, self.cfg.state_size)
+        c = x.new_zeros(n, self.cfg.state_size)
         hs = []
         for t in range(t_len):
             h, c = self.cell(fingers[:, t], y_prev[:, t], h, c)
@@ -269,6 +314,7 @@ class Cchp(nn.Module):
         p_tf: float = 0.0,
         generator: Optional[torch.Generator] = None,
         keep_attention: bool = False,
+        readouts: Optional[List[torch.Tensor]] = None,
     ) -> Tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """Run the decoder cell over the target.
 
@@ -276,17 +322,20 @@ class Cchp(nn.Module):
         The previous output fed back is the ground truth with probability p_tf
         (per item and step), otherwise the model's own mean (detached).
         Returns mean, std (B, T, 6) in label-scale units and optionally the
-        attention weights (B, T, heads, K).
+        attention weights (B, T, heads, K). If `readouts` is a list, each
+        step's context read r(t) (B, heads, 6), label-scale units, is appended.
         """
         b, t_len, _ = x.shape
         fingers = self.cell.fingers(x)
-        h = x.new_zeros(b, self.cfg.hidden_size)
-        c = x.new_zeros(b, self.cfg.hidden_size)
+        h = x.new_zeros(b, self.cfg.state_size)
+        c = x.new_zeros(b, self.cfg.state_size)
         y_prev = x.new_zeros(b, MOTION_DIM)
         means, stds, attns = [], [], []
         for t in range(t_len):
             h, c = self.cell(fingers[:, t], y_prev, h, c)
             r, weights = self.attention(h, ctx.keys, ctx.values, ctx.mask)
+            if readouts is not None:
+                readouts.append(r)
             mean, std = self.output(r, h, z)
             means.append(mean)
             stds.append(std)
@@ -316,9 +365,10 @@ class Cchp(nn.Module):
         generator: Optional[torch.Generator] = None,
         x_noise_std: float = 0.0,
         nll_beta: float = 0.0,
+        readout_weight: float = 0.0,
     ) -> Dict[str, torch.Tensor]:
         """The ELBO terms for a batch (see `cchp_elbo`)."""
-        return cchp_elbo(self, batch, p_tf, sample_posterior, generator, x_noise_std, nll_beta)
+        return cchp_elbo(self, batch, p_tf, sample_posterior, generator, x_noise_std, nll_beta, readout_weight)
 
     @torch.no_grad()
     def predict(
@@ -349,6 +399,7 @@ def cchp_elbo(
     generator: Optional[torch.Generator] = None,
     x_noise_std: float = 0.0,
     nll_beta: float = 0.0,
+    readout_weight: float = 0.0,
 ) -> Dict[str, torch.Tensor]:
     """Negative ELBO per target clip, averaged over the batch.
 
@@ -356,7 +407,13 @@ def cchp_elbo(
     (paper, eq. "elbo_2"), one z sample per clip. The log-likelihood is taken
     in physical units, so values compare across models with the same data.
     `x_noise_std` adds Gaussian noise (in physical units) to the target input.
-    Returns loss (= -ELBO), nll, kl, and mse of the mean (per step and dimension).
+    `readout_weight` > 0 adds to the training loss that many times
+    0.5 * sum_t |r(t) - y(t)|^2 (label-scale units, per clip): the context read
+    itself should predict the twist. This trains the attention to find the
+    context steps with the same gesture directly, instead of only through the
+    output heads, which early in training learn to ignore an uninformative read.
+    Returns loss (the training objective), elbo_loss (= -ELBO), nll, kl, mse of
+    the mean (per step and dimension) and, with a readout weight, readout_mse.
     """
     h_c, h_t = model.encode_context_and_target(batch)
     ctx, stats = model.encode_context(batch, h_c)
@@ -370,10 +427,21 @@ def cchp_elbo(
     if x_noise_std > 0.0:
         x = x + x_noise_std * torch.randn(x.shape, generator=generator, device=x.device)
     y_n = model.normalizer_y(batch.y)
-    mean_n, std_n, _ = model.decode(model.normalizer_x(x), ctx, z, y_teacher=y_n, p_tf=p_tf, generator=generator)
+    reads: Optional[List[torch.Tensor]] = [] if readout_weight > 0.0 else None
+    mean_n, std_n, _ = model.decode(model.normalizer_x(x), ctx, z, y_teacher=y_n, p_tf=p_tf, generator=generator,
+                                    readouts=reads)
     scale = model.normalizer.label_scale
     kl = gaussian_kl(post_mu, post_sigma, ctx.z_mu, ctx.z_sigma)
-    return likelihood_terms(batch, mean_n * scale, std_n * scale, kl, scale, nll_beta)
+    terms = likelihood_terms(batch, mean_n * scale, std_n * scale, kl, scale, nll_beta)
+    if reads is not None:
+        r = torch.stack(reads, 1)  # (B, T, heads, 6)
+        # One head: its read of every dimension; one head per dimension: head d's read of dimension d.
+        r = r[:, :, 0] if r.shape[2] == 1 else torch.diagonal(r, dim1=2, dim2=3)
+        m = batch.mask.to(r.dtype)
+        sq = ((r - y_n) ** 2).sum(-1) * m  # (B, T)
+        terms["loss"] = terms["loss"] + readout_weight * 0.5 * sq.sum(1).mean()
+        terms["readout_mse"] = sq.sum() / (m.sum().clamp_min(1.0) * MOTION_DIM)
+    return terms
 
 
 def likelihood_terms(
