@@ -57,6 +57,7 @@ class CchpPolicy(nn.Module):
         self.attention_heads = cfg.attention_heads
         self.key_size = cfg.key_size
         self.std_min = float(cfg.std_min)
+        self.read_skip = bool(cfg.read_skip)
         self.latent_std_min = float(cfg.latent_std_min)
         self.distance_kernel = cfg.attention_kernel == "distance"
         self.key_scale = 1.0 if self.distance_kernel else 1.0 / math.sqrt(cfg.key_size)
@@ -155,7 +156,10 @@ class CchpPolicy(nn.Module):
             i += 1
         out = inp.view(6, 2)
         scale = self.label_scale
-        mean = out[:, 0] * scale
+        mean_n = out[:, 0]
+        if self.read_skip:  # dimension d adds its read of dimension d
+            mean_n = mean_n + torch.diagonal(r.expand(6, 6))
+        mean = mean_n * scale
         std = (self.std_min + (1.0 - self.std_min) * nn.functional.softplus(out[:, 1])) * scale
         attention = weights[0] if self.attention_heads == 1 else weights
         return mean, std, h2.view(-1), c2.view(-1), attention

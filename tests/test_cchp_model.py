@@ -197,3 +197,19 @@ def test_readout_loss_is_the_context_read_error(heads):
     model.zero_grad()
     (with_read["loss"] - plain["loss"]).backward()
     assert model.attention.kq.weight.grad.abs().sum() > 0
+
+
+def test_read_skip_adds_the_context_read_to_the_mean():
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(**SMALL, key_source="gesture", gesture_hidden_size=8, attention_kernel="distance",
+                            read_skip=True)).eval()
+    with torch.no_grad():  # f_y outputs zero: the mean is the read alone
+        for w, b in zip(model.output.net.weights, model.output.net.biases):
+            w.zero_()
+            b.zero_()
+    batch = collate(*_batch())
+    ctx, _ = model.encode_context(batch)
+    reads = []
+    mean, _, _ = model.decode(model.normalizer_x(batch.x), ctx, ctx.z_mu, readouts=reads)
+    read = torch.stack(reads, 1)[:, :, 0]
+    assert torch.allclose(mean, read) and read.abs().max() > 0

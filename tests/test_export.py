@@ -21,9 +21,10 @@ def _clip(rng, n):
     return rng.normal(size=(n, 36)).astype(np.float32) * 0.3, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
 
 
-def _model(heads=1, key_source="state", kernel="dot"):
+def _model(heads=1, key_source="state", kernel="dot", read_skip=False):
     torch.manual_seed(0)
-    model = Cchp(CchpConfig(attention_heads=heads, key_source=key_source, attention_kernel=kernel)).eval()
+    model = Cchp(CchpConfig(attention_heads=heads, key_source=key_source, attention_kernel=kernel,
+                            read_skip=read_skip)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     return model
 
@@ -45,10 +46,11 @@ def _run_policy(policy, target_x, context, z=None):
     return torch.stack(means), atts, (keys, values, z_mu, z_sigma)
 
 
-@pytest.mark.parametrize("heads,key_source,kernel", [(1, "state", "dot"), (6, "state", "dot"), (1, "gesture", "dot"),
-                                                     (1, "gesture", "distance"), (6, "gesture", "distance")])
-def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel):
-    model = _model(heads, key_source, kernel)
+@pytest.mark.parametrize("heads,key_source,kernel,skip", [
+    (1, "state", "dot", False), (6, "state", "dot", False), (1, "gesture", "dot", False),
+    (1, "gesture", "distance", True), (6, "gesture", "distance", True)])
+def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, skip):
+    model = _model(heads, key_source, kernel, skip)
     rng = np.random.default_rng(heads)
     target = _clip(rng, 45)
     context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]

@@ -56,6 +56,9 @@ class CchpConfig:
     # -|q - k|^2: a Gaussian kernel on the projected states, which learns to
     # pick out the context steps nearest to the query much sooner.
     attention_kernel: str = "dot"
+    # True: the mean is the context read plus f_y's output (f_y learns a
+    # correction to the read); False: f_y's output alone (paper).
+    read_skip: bool = False
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
@@ -195,6 +198,7 @@ class OutputHeads(nn.Module):
         in_size = MOTION_DIM + cfg.state_size + cfg.latent_dim
         self.net = PerDimensionMLP(MOTION_DIM, [in_size] + list(cfg.output_hidden) + [2])
         self.std_min = cfg.std_min
+        self.read_skip = cfg.read_skip
 
     def forward(self, r: torch.Tensor, h: torch.Tensor, z: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         """r (B, heads, 6), h (B, H), z (B, Dz) -> mean, std (B, 6) in label-scale units."""
@@ -202,7 +206,10 @@ class OutputHeads(nn.Module):
         r = r.expand(b, MOTION_DIM, MOTION_DIM)  # one context read per output dimension
         hz = torch.cat([h, z], -1).unsqueeze(1).expand(b, MOTION_DIM, h.shape[-1] + z.shape[-1])
         out = self.net(torch.cat([r, hz], -1))  # (B, 6, 2)
-        return out[..., 0], bounded_std(out[..., 1], self.std_min)
+        mean = out[..., 0]
+        if self.read_skip:  # output dimension d adds its own read of dimension d
+            mean = mean + torch.diagonal(r, dim1=1, dim2=2)
+        return mean, bounded_std(out[..., 1], self.std_min)
 
 
 @dataclass
