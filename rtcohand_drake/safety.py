@@ -117,15 +117,21 @@ class SafetySupervisor(LeafSystem):
             return None
         p = self._X_mold_W.multiply(p_W)
         margin = self._cfg.mold_exit_margin_m
+        top = max(self._cfg.mold_exit_height_m, self._cfg.mold_turn_height_m)
         inside = (abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
-                  and p[2] < self._cfg.mold_exit_height_m)
+                  and p[2] < top)
         return p if inside else None
 
     def limit_to_mold_exit(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
-        """In the mold's exit corridor only motion along the mold's axis passes: no turn, no sideways move."""
+        """In the mold's exit corridor only motion along the mold's axis passes: no turn, no
+        sideways move. Above it, up to the turn height, only the turns are removed."""
         p_mold = self._mold_exit_position(p_W)
         if p_mold is None:
             return twist_U, Intervention.NONE
+        if p_mold[2] >= self._cfg.mold_exit_height_m:  # clear of the walls, but a turn could swing a corner into them
+            out = np.concatenate([twist_U[:3], np.zeros(3)])
+            acted = Intervention.MOLD_EXIT if np.max(np.abs(twist_U[3:])) > 1e-9 else Intervention.NONE
+            return out, acted
         axis_W = self._mold_axis_W
         v_W = self._R_WU @ twist_U[:3]
         along = float(v_W @ axis_W)

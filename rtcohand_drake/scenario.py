@@ -171,6 +171,11 @@ class Safety:
     # touching its walls whatever the gesture asks. Default: the upright part (0.05 m
     # half height) clears the 0.04 m walls at 0.09 m, plus 1 cm. 0 switches it off.
     mold_exit_height_m: float = 0.10
+    # Above that, up to this height, turns are still removed over the cavity: a turning
+    # part sweeps its corners (0.094 m from its centre) below the centre, and must not
+    # swing one into the walls (0.04 m high): 0.04 + 0.094 + 1 cm. 0: turns free above
+    # the exit height.
+    mold_turn_height_m: float = 0.145
     mold_exit_margin_m: float = 0.02
     # ... and below this height of the workpiece centre over the cavity floor (m) it may
     # not move down (the upright part rests at 0.052 m: python -m rtcohand_drake.initial_pose).

@@ -8,7 +8,8 @@ DistributedDataParallel (gloo on CPU, nccl on GPU): the global batch is split
 over the processes, rank 0 writes the checkpoint, history and figure.
 
 Writes DIR/checkpoint.pt (every --checkpoint-every steps and at the end),
-DIR/history.json and DIR/training_curve.png.
+DIR/best.pt (the model at the validation with the lowest MSE so far: early
+stopping), DIR/history.json and DIR/training_curve.png.
 """
 
 from __future__ import annotations
@@ -251,6 +252,8 @@ def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = 
                 history["val_step"].append(step + 1)
                 history["val_mse"].append(v["mse"])
                 history["val_loss"].append(v["loss"])
+                if v["mse"] <= min(history["val_mse"]):  # early stopping: keep the best validated model
+                    _save(model, cfg, step + 1, history, out_dir, data, start, samples, world, name="best.pt")
             if (step + 1) % cfg.checkpoint_every == 0:
                 _save(model, cfg, step + 1, history, out_dir, data, start, samples, world)
         if cfg.max_minutes > 0 and time.perf_counter() - start > 60.0 * cfg.max_minutes:
@@ -290,7 +293,7 @@ def validate(model: nn.Module, batch: Batch) -> Dict[str, float]:
     return {"loss": float(terms["loss"]), "mse": float(mse)}
 
 
-def _save(model, cfg, step, history, out_dir, data, start, samples, world) -> None:
+def _save(model, cfg, step, history, out_dir, data, start, samples, world, name="checkpoint.pt") -> None:
     elapsed = time.perf_counter() - start
     meta = {
         "data": str(data),
@@ -300,7 +303,7 @@ def _save(model, cfg, step, history, out_dir, data, start, samples, world) -> No
         "threads": torch.get_num_threads(),
         "torch": torch.__version__,
     }
-    save_checkpoint(out_dir / "checkpoint.pt", model, asdict(cfg), step, history, meta)
+    save_checkpoint(out_dir / name, model, asdict(cfg), step, history, meta)
 
 
 def plot_history(history: Dict[str, List], path: pathlib.Path, title: str = "") -> None:

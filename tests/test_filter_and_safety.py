@@ -189,8 +189,14 @@ def test_mold_exit_corridor_passes_only_motion_along_the_mold_axis():
     raised = np.r_[0.45, -0.12, 0.03 + 0.07, 1, 0, 0, 0]
     cmd, _ = _advance(s, ctx, sim, 1.0, request=down, pose=raised)[-1]
     assert np.allclose(cmd, [0, 0, -0.05, 0, 0, 0], atol=1e-12)
-    # Above the exit height (0.10 m over the floor) or beside the cavity, everything passes again.
-    for clear in ([0.45, -0.12, 0.03 + 0.11], [0.45 + 0.083 + 0.03, -0.12, 0.03 + 0.052]):
+    # Above the exit height (0.10 m over the floor) but below the turn height (0.145 m) the part
+    # may move any way but not turn: a turn would swing a corner into the walls.
+    above_walls = np.r_[0.45, -0.12, 0.03 + 0.11, 1, 0, 0, 0]
+    cmd, status = _advance(s, ctx, sim, 2.0, request=ask, pose=above_walls)[-1]
+    assert np.allclose(cmd, ask[:3] + [0, 0, 0], atol=1e-9)
+    assert int(status[2]) & Intervention.MOLD_EXIT
+    # Above the turn height or beside the cavity, everything passes again.
+    for clear in ([0.45, -0.12, 0.03 + 0.15], [0.45 + 0.083 + 0.03, -0.12, 0.03 + 0.052]):
         cmd, status = _advance(s, ctx, sim, 2.0, request=ask, pose=np.r_[clear, 1, 0, 0, 0])[-1]
         assert np.allclose(cmd, ask, atol=1e-9), clear
         assert not int(status[2]) & Intervention.MOLD_EXIT
