@@ -12,6 +12,9 @@
    exceed 10% of the clip's peak; the onset is the first supervisor command on
    the clip's active dimension, with the clip's sign, above 20% of that
    command's peak during the clip. Median over the clips, and the ratio.
+   The mold exit corridor is switched off for this measurement: the part
+   starts seated in the mold, where the corridor passes nothing but a lift,
+   so with it on only lifting clips would give a command at all.
 """
 
 import argparse
@@ -49,6 +52,7 @@ def real_time_factor(scenario, model, duration, repeats):
 
 def onset_latencies(scenario, model, clips, pieces, mode):
     scenario.command_filter.mode = mode
+    scenario.safety.mold_exit_height_m = 0.0  # the corridor off (module docstring)
     latencies = []
     for clip in clips:
         policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=0)
