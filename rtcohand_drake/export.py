@@ -11,12 +11,13 @@
 
 and the integer attributes feature_dim (36), hidden_size (H: the size of the
 recurrent state h and c, which includes the gesture cell's state when the
-attention keys come from one), latent_dim (Dz), attention_heads and key_size. Inputs and outputs are in physical units
-(features as the hand-feature module gives them, twists in m/s and rad/s);
-NaN features (hand lost) are read as zeros. K is the number of True entries of
-`mask`: each context piece (row of x_c) is encoded from a zero state, and the
-keys are already projected, so a step costs one LSTM cell and a few small MLPs
-plus one dot product per context step. The caller keeps (h, c), feeds back the
+attention keys come from one), latent_dim (Dz), attention_heads and key_size.
+Inputs and outputs are in physical units (features as the hand-feature module
+gives them, twists in m/s and rad/s); NaN features (hand lost) are read as
+zeros. K is the number of True entries of `mask`: each context piece (row of
+x_c) is encoded from a zero state, and the keys are already projected, so a
+step costs one or two LSTM cells and a few small MLPs plus one dot product or
+squared distance per context step. The caller keeps (h, c), feeds back the
 previous mean as y_prev, starts from zeros, and draws z ~ N(z_mu, z_sigma)
 itself (for example on every resume).
 """

@@ -295,6 +295,8 @@ def _check_values(s: Scenario, source: str) -> None:
          "safety: pause_ramp_s and stale_after_s must be > 0, lookahead_s >= 0")
     need(sa.max_linear_accel_m_s2 > 0 and sa.max_angular_accel_rad_s2 > 0,
          "safety acceleration limits must be > 0")
+    need(min(sa.mold_exit_height_m, sa.mold_turn_height_m, sa.mold_exit_margin_m, sa.mold_seat_height_m) >= 0,
+         "safety mold corridor heights and margin must be >= 0")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 

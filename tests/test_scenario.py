@@ -32,6 +32,7 @@ def _write(tmp_path, text):
     ("duration_s: [1\n", "malformed YAML"),
     ("duration_s: -3\n", "duration_s must be > 0"),
     ("workspace: {min_xyz: [0, 0, 1], max_xyz: [1, 1, 0]}\n", "min_xyz must be below max_xyz"),
+    ("safety: {mold_turn_height_m: -0.1}\n", "mold corridor heights and margin must be >= 0"),
 ])
 def test_bad_scenario_is_one_line_naming_file_and_problem(tmp_path, text, expected):
     path = _write(tmp_path, text)
