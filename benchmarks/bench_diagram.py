@@ -17,6 +17,8 @@
    so with it on only lifting clips would give a command at all.
 """
 
+from __future__ import annotations
+
 import argparse
 import statistics
 import tempfile
@@ -50,29 +52,44 @@ def real_time_factor(scenario, model, duration, repeats):
     return factors
 
 
+def _onset(t: np.ndarray, along: np.ndarray, t0: float) -> float | None:
+    """First time at or after t0 where `along` exceeds 20 % of its peak (None: it never goes positive)."""
+    if along.max() <= 1e-6:
+        return None
+    above = np.flatnonzero((along > 0.2 * along.max()) & (t >= t0 - 1e-9))
+    return float(t[above[0]] - t0) if len(above) else None
+
+
 def onset_latencies(scenario, model, clips, pieces, mode):
+    """Per clip: (label, policy mean, command) onsets after the gesture start, s (None where absent)."""
     scenario.command_filter.mode = mode
     scenario.safety.mold_exit_height_m = 0.0  # the corridor off (module docstring)
-    latencies = []
+    rate = scenario.policy.rate_hz
+    onsets = []
     for clip in clips:
-        policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=0)
-        source = ReplayGestureSource([clip], scenario.policy.rate_hz)
+        policy = CchpPolicy(model, pieces, rate, seed=0)
+        source = ReplayGestureSource([clip], rate)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)
         simulator.AdvanceTo(source.end_time)
-        log = run.loggers["command_twist"].FindLog(simulator.get_context())
+        root = simulator.get_context()
+        log = run.loggers["command_twist"].FindLog(root)
         t, cmd = log.sample_times(), log.data().T
+        plog = run.loggers["policy_mean"].FindLog(root)
+        tp, mean = plog.sample_times(), plog.data().T
         dim = int(clip.active_dims[0])
         sign = np.sign(clip.labels[np.argmax(np.abs(clip.labels[:, dim])), dim])
         strength = np.linalg.norm(clip.features, axis=1)
-        k0 = int(np.argmax(strength > 0.1 * strength.max()))
-        along = sign * cmd[:, dim]
-        if along.max() <= 1e-6:
-            continue  # the policy never commanded this motion: no onset to measure
-        above = np.flatnonzero((along > 0.2 * along.max()) & (t >= k0 / scenario.policy.rate_hz))
-        if len(above):
-            latencies.append(t[above[0]] - k0 / scenario.policy.rate_hz)
-    return latencies
+        t0 = int(np.argmax(strength > 0.1 * strength.max())) / rate
+        t_label = np.arange(len(clip.labels)) / rate
+        onsets.append((_onset(t_label, sign * clip.labels[:, dim], t0), _onset(tp, sign * mean[:, dim], t0),
+                       _onset(t, sign * cmd[:, dim], t0)))
+    return onsets
+
+
+def _median_ms(values) -> str:
+    values = [v for v in values if v is not None]
+    return f"{statistics.median(values) * 1e3:.0f} ms ({len(values)} clips)" if values else "n/a"
 
 
 def main():
@@ -98,11 +115,17 @@ def main():
     pieces = [(c.features, c.labels) for c in mine if c not in singles]
     paper = onset_latencies(scenario, model, singles, pieces, "paper")
     responsive = onset_latencies(scenario, model, singles, pieces, "responsive")
-    mp, mr = statistics.median(paper), statistics.median(responsive)
-    print(f"onset latency (user {user}, {len(singles)} single-dimension clips): paper mode median {mp * 1e3:.0f} ms "
-          f"({len(paper)} clips), responsive mode median {mr * 1e3:.0f} ms ({len(responsive)} clips), "
-          f"ratio {mp / mr:.1f}x")
-
+    commands = {name: [o[2] for o in onsets] for name, onsets in (("paper", paper), ("responsive", responsive))}
+    mp = statistics.median([v for v in commands["paper"] if v is not None])
+    mr = statistics.median([v for v in commands["responsive"] if v is not None])
+    print(f"onset latency (user {user}, {len(singles)} single-dimension clips), gesture start -> 20 % of peak:")
+    print(f"  labels (the handler's reaction and lag): {_median_ms([o[0] for o in paper])}")
+    print(f"  policy mean: {_median_ms([o[1] for o in paper])}")
+    for name, onsets in (("paper", paper), ("responsive", responsive)):
+        lag = [c - p for _, p, c in onsets if c is not None and p is not None]
+        print(f"  command, {name} mode: {_median_ms(commands[name])}; the filter's own lag "
+              f"(command onset - policy onset, per clip): {_median_ms(lag)}")
+    print(f"  ratio of command onsets, paper / responsive: {mp / mr:.1f}x")
 
 if __name__ == "__main__":
     main()

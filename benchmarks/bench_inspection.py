@@ -1,7 +1,7 @@
 """The inspection task for each out-sample user, through the run CLI itself.
 
     python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
-        [--duration 120] [--jobs 2] [--out DIR] [--intent [--intent-delay 0.3]]
+        [--duration 120] [--jobs 2] [--out DIR] [--filter-mode paper|responsive] [--intent [--intent-delay 0.3]]
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 --no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
@@ -53,6 +53,8 @@ def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
            "--no-meshcat", "--user", user, "--duration", str(args.duration), "--log", str(log)]
     if args.model:
         cmd += ["--model", args.model]
+    if args.filter_mode:
+        cmd += ["--filter-mode", args.filter_mode]
     done = subprocess.run(cmd, capture_output=True, text=True)
     return user, done.returncode, done.stderr.strip().splitlines()[-1] if done.returncode else ""
 
@@ -67,6 +69,8 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     from rtcohand_drake.run_log import write_run_log
 
     scenario = load_scenario(args.scenario)
+    if args.filter_mode:
+        scenario.command_filter.mode = args.filter_mode
     source, _ = make_builtin_operator(scenario, seed=0, user=user)
     run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
                             gesture_source="intent")
@@ -85,6 +89,8 @@ def main() -> int:
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
+                   help="override the scenario's command_filter.mode (as the run CLI's flag)")
     p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
     p.add_argument("--intent", action="store_true",
                    help="reference: replace the policy by the simulated person's intended twist, delayed "
@@ -92,6 +98,8 @@ def main() -> int:
     p.add_argument("--intent-delay", type=float, default=0.3, help="delay of --intent (s)")
     args = p.parse_args()
     scenario = load_scenario(args.scenario)
+    if args.filter_mode:
+        scenario.command_filter.mode = args.filter_mode
     v_lim, w_lim = scenario.safety.max_linear_speed_m_s, scenario.safety.max_angular_speed_rad_s
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out or tmp)
@@ -101,7 +109,7 @@ def main() -> int:
             results = list(pool.map(lambda u: one(u, args, out), args.users))
         policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
                   else args.model or "models/cchp_default.pt")
-        print(f"policy: {policy}; limits {v_lim} m/s, {w_lim} rad/s")
+        print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; limits {v_lim} m/s, {w_lim} rad/s")
         print("| user | faces | completion | mold (closest, mm) | peak v (m/s) | peak w (rad/s) "
               "| joint q / v over limit | events |")
         print("|---|---|---|---|---|---|---|---|")

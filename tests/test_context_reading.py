@@ -1,0 +1,104 @@
+"""The held-out reading check of a user's gestures (rtcohand_drake.context_reading)."""
+
+import numpy as np
+import pytest
+import torch
+
+from rtcohand_drake import context_reading as cr
+from rtcohand_drake.data.dataset import write_dataset
+from rtcohand_drake.data.population import GeneratorConfig, generate_population
+from rtcohand_drake.errors import run_cli
+
+
+class ScaledEcho:
+    """A stand-in policy module: its mean is `gain` times the first six features.
+
+    It records the features of every context it is given, so a test can check
+    that a clip is never played with itself in the context.
+    """
+
+    hidden_size = 4
+
+    def __init__(self, gain):
+        self.gain = gain
+        self.contexts = []
+
+    def encode_context(self, x_c, y_c, mask):
+        self.contexts.append(x_c[mask].numpy().copy())
+        return torch.zeros(int(mask.sum()), 2), y_c[mask], torch.zeros(3), torch.ones(3)
+
+    def step(self, x_t, y_prev, h, c, keys, values, z):
+        mean = self.gain * x_t[:6]
+        return mean, torch.ones(6), h, c, torch.zeros(keys.shape[0])
+
+
+def _clips(n=12, length=30, seed=0):
+    """Clips whose first six features equal their labels; clip i moves dimension i % 6 with sign (-1)^(i // 6)."""
+    rng = np.random.default_rng(seed)
+    clips = []
+    for i in range(n):
+        d, sign = i % 6, (-1) ** (i // 6)
+        labels = np.zeros((length, 6))
+        labels[5:25, d] = sign * (0.1 + 0.02 * rng.random()) * np.sin(np.linspace(0, np.pi, 20))
+        features = np.zeros((length, 36))
+        features[:, :6] = labels
+        features[:, 6:] = rng.normal(0, 0.01, (length, 30))
+        clips.append(cr.LabelledClip(f"c{i}", features, labels, (d,)))
+    return clips
+
+
+@pytest.mark.parametrize("gain", [1.0, 0.3, -0.5])
+def test_reading_gain_is_the_predicted_share_of_the_label(gain):
+    readings = cr.held_out_readings(ScaledEcho(gain), _clips(), folds=3)
+    assert len(readings) == 12
+    assert np.allclose([r.gain for r in readings], gain, atol=1e-5)
+    rows = cr.motion_table(readings)
+    assert [name for name, *_ in rows] == [cr.motion_name(d, s) for d in range(6) for s in (1, -1)]
+    assert {word for *_, word in rows} == {cr.verdict(gain)}
+
+
+def test_verdicts():
+    assert cr.verdict(0.8) == "reads" and cr.verdict(0.3) == "weak"
+    assert cr.verdict(0.1) == "poor" and cr.verdict(-0.9) == "poor"
+
+
+def test_a_clip_is_never_in_its_own_context():
+    clips = _clips()
+    module = ScaledEcho(1.0)
+    cr.held_out_readings(module, clips, folds=4)
+    assert len(module.contexts) == 4
+    for f, context in enumerate(module.contexts):
+        for i, clip in enumerate(clips):
+            inside = any(np.allclose(context[k:k + len(clip.features)], clip.features)
+                         for k in range(0, len(context) - len(clip.features) + 1, len(clip.features)))
+            assert inside == (i % 4 != f)
+
+
+def test_cli_prints_a_row_per_motion(tmp_path, capsys):
+    from rtcohand_drake.export import script_policy
+    from rtcohand_drake.model.cchp import Cchp, CchpConfig
+
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(hidden_size=16, aggregate_sizes=[16], latent_trunk_sizes=[16],
+                            latent_dim=4, key_size=8, output_hidden=[16]))
+    policy = tmp_path / "policy.pt"
+    torch.jit.save(script_policy(model), str(policy))
+    data = tmp_path / "one_user.h5"
+    write_dataset(data, list(generate_population(GeneratorConfig(), n_users=1, seed=2)))
+    status = run_cli(cr.main, ["--context-file", str(data), "--model", str(policy), "--folds", "3"])
+    out = capsys.readouterr().out
+    assert status == 0
+    rows = [line for line in out.splitlines() if line.startswith("| ") and line[2:4] in cr.MOTION_NAMES]
+    assert len(rows) == 12
+    assert "median reading gain" in out
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["--folds", "1", "--user", "u10"], "--folds must be >= 2"),
+    ([], "give either --context-file"),
+    (["--user", "u99"], "unknown user 'u99'"),
+])
+def test_cli_bad_input_is_one_line(argv, expected, capsys):
+    assert run_cli(cr.main, argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert expected in err and len(err.splitlines()) == 1
