@@ -146,6 +146,20 @@ for c in clips[:4]:
     print(c.name, "active dims", list(c.active_dims), "|", c.description[:80])'''),
     new_code_cell('''from rtcohand_drake.data.plots import clip_figure
 fig = clip_figure(read_dataset(work / "my_clips.h5")[0])'''),
+    new_markdown_cell("""Before the session: how well does the policy read each of this user's gestures?
+Each clip is played through the policy with the user's other clips as context (held out, as in
+the run). A gain of 1 moves the part at the speed the labels say; a gesture read well below half
+its size is worth re-recording, or replacing by a more distinct one
+(`python -m rtcohand_drake.context_reading --context-file my_clips.h5` prints the same table)."""),
+    new_code_cell('''from rtcohand_drake.context_reading import clips_from_file, held_out_readings, motion_table
+from rtcohand_drake.model_files import models_dir
+from rtcohand_drake.policy_file import load_policy
+mine, _ = clips_from_file(work / "my_clips.h5", user_id, rate_hz=10.0)
+if SHORT:
+    mine = mine[::6]  # a quick look in the short mode
+readings = held_out_readings(load_policy(models_dir() / "cchp_default.pt"), mine, folds=3)
+for motion, n, gain, word in motion_table(readings):
+    print(f"{motion}: reading gain {gain:+.2f} over {n} clip(s): {word}")'''),
     new_code_cell('''duration = "10" if SHORT else "120"
 out = subprocess.run([sys.executable, "-m", "rtcohand_drake.run", "--scenario", "inspection", "--no-meshcat",
                       "--realtime-rate", "0", "--duration", duration, "--user", user_id,
