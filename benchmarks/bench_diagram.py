@@ -42,7 +42,8 @@ def real_time_factor(scenario, model, duration, repeats):
     factors = []
     for seed in range(repeats):
         source, pieces = make_builtin_operator(scenario, seed=seed)
-        policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=seed)
+        policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=seed,
+                            correction_weight=scenario.policy.correction_weight)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)
         simulator.Initialize()
@@ -67,7 +68,7 @@ def onset_latencies(scenario, model, clips, pieces, mode):
     rate = scenario.policy.rate_hz
     onsets = []
     for clip in clips:
-        policy = CchpPolicy(model, pieces, rate, seed=0)
+        policy = CchpPolicy(model, pieces, rate, seed=0, correction_weight=scenario.policy.correction_weight)
         source = ReplayGestureSource([clip], rate)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)

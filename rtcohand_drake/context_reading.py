@@ -62,23 +62,31 @@ def verdict(gain: float) -> str:
     return "reads" if gain >= READS else "weak" if gain >= WEAK else "poor"
 
 
-def play_clip(module, features: np.ndarray, keys, values, z) -> np.ndarray:
-    """The policy's means (T, 6) over one clip from a zero state, its own mean fed back."""
+def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: float = 1.0) -> np.ndarray:
+    """The policy's output twists (T, 6) over one clip from a zero state, the module's own mean fed back.
+
+    The output is r + w (mean - r), r the context read, as `policy_system.CchpPolicy` gives it.
+    """
     import torch
 
     H = int(module.hidden_size)
     h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
     x = torch.from_numpy(np.ascontiguousarray(features, np.float32))
-    means = np.zeros((len(features), 6))
+    out = np.zeros((len(features), 6))
     with torch.no_grad():
         for t in range(len(features)):
-            y, _, h, c, _ = module.step(x[t], y, h, c, keys, values, z)
-            means[t] = y.numpy()
-    return means
+            y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
+            out[t] = y.numpy()
+            if correction_weight != 1.0:
+                r = (attention @ values).numpy()
+                r = np.diagonal(r) if r.ndim == 2 else r
+                out[t] = r + correction_weight * (out[t] - r)
+    return out
 
 
-def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6) -> list[ClipReading]:
-    """The reading gain on each active dimension of every clip, played with the other folds as context."""
+def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
+                   correction_weight: float = 1.0) -> list[np.ndarray]:
+    """The policy's output (T, 6) over every clip, each played with the other folds as context."""
     import torch
 
     from rtcohand_drake.policy_system import pack_context
@@ -86,26 +94,33 @@ def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6) -> 
     if len(clips) < 2:
         raise ValueError("need at least two labelled clips (one to play, one as context)")
     folds = max(2, min(folds, len(clips)))
-    readings = []
+    means: list = [None] * len(clips)
     for f in range(folds):
-        held = [c for i, c in enumerate(clips) if i % folds == f]
         x_c, y_c, mask = pack_context([(c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
         with torch.no_grad():
             keys, values, z_mu, _ = module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
-        for clip in held:
-            if not clip.active_dims:
+        for i in range(f, len(clips), folds):
+            means[i] = play_clip(module, clips[i].features, keys, values, z_mu, correction_weight)
+    return means
+
+
+def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6, correction_weight: float = 1.0,
+                      means: Sequence[np.ndarray] | None = None) -> list[ClipReading]:
+    """The reading gain on each active dimension of every clip, played with the other folds as context
+    (or read from `means`, the output of `held_out_means`, when given)."""
+    if means is None:
+        means = held_out_means(module, clips, folds, correction_weight)
+    readings = []
+    for clip, means in zip(clips, means):
+        for d in clip.active_dims:
+            label = clip.labels[:, d]
+            peak = np.max(np.abs(label))
+            if peak <= 0:
                 continue
-            means = play_clip(module, clip.features, keys, values, z_mu)
-            for d in clip.active_dims:
-                label = clip.labels[:, d]
-                peak = np.max(np.abs(label))
-                if peak <= 0:
-                    continue
-                active = np.abs(label) > ACTIVE_SHARE * peak
-                along = float(label[active].mean())
-                readings.append(ClipReading(clip.name, int(d), int(np.sign(along)),
-                                            float(means[active, d].mean() / along)))
+            active = np.abs(label) > ACTIVE_SHARE * peak
+            along = float(label[active].mean())
+            readings.append(ClipReading(clip.name, int(d), int(np.sign(along)), float(means[active, d].mean() / along)))
     return readings
 
 
@@ -164,7 +179,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--context-file", type=Path, default=None, help="dataset file with the user's labelled clips")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
     p.add_argument("--user", default=None, help="a built-in simulated user instead (u00 .. u14)")
-    p.add_argument("--model", type=Path, default=None, help="exported policy (default: the shipped one)")
+    p.add_argument("--scenario", default="inspection",
+                   help="scenario whose policy settings (model, correction_weight) are checked")
+    p.add_argument("--model", type=Path, default=None, help="exported policy (default: the scenario's)")
+    p.add_argument("--correction-weight", type=float, default=None,
+                   help="w of the policy's output r + w (mean - r) (default: the scenario's)")
     p.add_argument("--folds", type=int, default=6)
     p.add_argument("--rate-hz", type=float, default=10.0)
     args = p.parse_args(argv)
@@ -172,18 +191,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise InputError("command line: give either --context-file (with --context-user) or --user")
     if args.folds < 2:
         raise InputError("command line: --folds must be >= 2")
-    from rtcohand_drake.model_files import models_dir
+    from rtcohand_drake.model_files import policy_file_path
     from rtcohand_drake.policy_file import load_policy
+    from rtcohand_drake.scenario import load_scenario
 
-    module = load_policy(args.model or models_dir() / "cchp_default.pt")
+    scenario = load_scenario(args.scenario)
+    weight = scenario.policy.correction_weight if args.correction_weight is None else args.correction_weight
+    if not 0.0 <= weight <= 1.0:
+        raise InputError(f"command line: --correction-weight must be in [0, 1], got {weight}")
+    model = args.model or policy_file_path(scenario.policy.model)
+    module = load_policy(model)
     if args.user is not None:
         clips, who = builtin_clips(args.user, args.rate_hz), args.user
     else:
         clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz)
-    readings = held_out_readings(module, clips, args.folds)
+    readings = held_out_readings(module, clips, args.folds, weight)
     rows = motion_table(readings)
     print(f"user {who}: {len(clips)} labelled clips, each read with the other {args.folds - 1} "
-          f"of {args.folds} folds as context")
+          f"of {args.folds} folds as context; policy {model.name}, correction weight {weight:g}")
     print("| motion | clips | reading gain (median) | verdict |")
     print("|---|---|---|---|")
     for name, n, gain, word in rows:

@@ -60,7 +60,8 @@ def _gestures():
 
     scenario = load_scenario("inspection")
     source, pieces = make_builtin_operator(scenario, seed=0)
-    policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz)
+    policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz,
+                        correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=source, policy=policy).diagram
 
 

@@ -44,3 +44,9 @@ def add_package(parser) -> None:
     package_map = parser.package_map()
     if not package_map.Contains(PACKAGE_NAME):
         package_map.AddPackageXml(str(models_dir() / "package.xml"))
+
+
+def policy_file_path(name: str | pathlib.Path) -> pathlib.Path:
+    """A scenario's `policy.model`: a path as given when it exists or is absolute, else a file in models/."""
+    path = pathlib.Path(name)
+    return path if path.is_absolute() or path.exists() else models_dir() / path

@@ -615,14 +615,16 @@ def population_user_ids(config: GeneratorConfig | None = None, n_users: int = PO
 
 
 def make_builtin_operator(scenario, seed: int = 0, user: str | None = None,
-                          config: OperatorConfig | None = None):
+                          config: OperatorConfig | None = None, population_seed: int = POPULATION_SEED):
     """The built-in operator and its context: (SimulatedOperator, [(features (T, 36), labels (T, 6)), ...]).
 
     The operator is a user of the population `python -m rtcohand_drake.data.generate`
     writes by default (15 users, seed 0): `user` names one by id ("u00" ..
     "u14"); by default the first out-sample user, whom no policy was trained on.
     The context is that user's 72 labelled clips at the policy rate, generated
-    here exactly as in that file.
+    here exactly as in that file. `population_seed` picks another population
+    (as `data.generate --seed N` writes it): people other than the benchmark's,
+    to validate a design choice on.
     """
     from rtcohand_drake.data.dataset import to_policy_clip
     from rtcohand_drake.station import eye_position
@@ -636,7 +638,7 @@ def make_builtin_operator(scenario, seed: int = 0, user: str | None = None,
         raise InputError(f"--user: unknown user {user!r}; valid ids: {', '.join(ids)} "
                          f"(out-sample: {', '.join(out)})")
     index = list(ids).index(user)
-    profile, clips, _ = simulate_user(generator, index, ids[user], POPULATION_SEED)
+    profile, clips, _ = simulate_user(generator, index, ids[user], population_seed)
     rate = scenario.policy.rate_hz
     pieces = []
     for clip in clips:

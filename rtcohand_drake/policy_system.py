@@ -6,16 +6,28 @@ context clones cleanly. The user's context clips are encoded once, at
 construction (keys, values, and the latent prior q(z|C) = N(z_mu, z_sigma)).
 
 Every policy period (1 / rate_hz) it runs one `step` on the newest gesture
-features, feeding back its own previous mean. When `resume_count` changes (the
-operator resumed after a pause) the recurrent state is cleared and a new z is
-drawn from q(z|C); the draw is deterministic given (seed, resume_count), so a
-run is reproducible.
+features, feeding back the module's own previous mean. When `resume_count`
+changes (the operator resumed after a pause) the recurrent state is cleared and
+a new z is drawn from q(z|C); the draw is deterministic given (seed,
+resume_count), so a run is reproducible.
+
+What it outputs as the twist is, with w = `correction_weight`,
+
+    policy_mean = r(t) + w * (mean(t) - r(t)),   r(t) = attention(t) . values
+
+r(t) is the context read: the user's own labelled twists, weighted by how alike
+the gestures are. For a model with `read_skip` (the shipped one), mean - r is
+the correction of the decoder f_y, which was learned on other people and pulls
+a gesture toward what it means to them; w = 1 is the module's mean itself (the
+paper's CCHP), w = 0 the read alone (`policy.correction_weight` in the
+scenario; the README has what each does in the closed-loop task). The module
+is always fed its own mean, as in training, whatever w is.
 
 Input ports
   gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)
   resume_count     (1)  optional; z is resampled when it changes
 Output ports
-  policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame
+  policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
   attention        (K)  attention weights over the K context steps (mean over heads)
 """
@@ -47,9 +59,13 @@ def pack_context(pieces, dtype=np.float32):
 
 
 class CchpPolicy(LeafSystem):
-    def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0):
+    def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
+                 correction_weight: float = 1.0):
         """`model_path`: an exported policy file, or a module already loaded by `load_policy`."""
         super().__init__()
+        if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
+            raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
+        self.correction_weight = float(correction_weight)
         import torch
 
         torch.set_num_threads(1)  # one cheap step per period; do not compete with the simulator
@@ -63,6 +79,7 @@ class CchpPolicy(LeafSystem):
             keys, values, z_mu, z_sigma = self.module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
         self._keys, self._values = keys.contiguous(), values.contiguous()
+        self._values_np = self._values.numpy().astype(np.float64)
         self.z_mu, self.z_sigma = z_mu.numpy().astype(np.float64), z_sigma.numpy().astype(np.float64)
         self.context_steps = int(keys.shape[0])
         self._seed = int(seed)
@@ -78,13 +95,14 @@ class CchpPolicy(LeafSystem):
         self._resume = self.DeclareVectorInputPort("resume_count", 1)
         self._h = self.DeclareDiscreteState(H)
         self._c = self.DeclareDiscreteState(H)
-        self._y = self.DeclareDiscreteState(6)  # also the mean output
+        self._y = self.DeclareDiscreteState(6)  # the module's own mean, fed back
         self._std = self.DeclareDiscreteState(np.zeros(6))
         self._z = self.DeclareDiscreteState(self.sample_z(0))
         self._resumes = self.DeclareDiscreteState(np.zeros(1))
         self._attn = self.DeclareDiscreteState(np.zeros(self.context_steps))
+        self._out = self.DeclareDiscreteState(6)  # the twist output (module docstring)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
-        self.DeclareStateOutputPort("policy_mean", self._y)
+        self.DeclareStateOutputPort("policy_mean", self._out)
         self.DeclareStateOutputPort("policy_std", self._std)
         self.DeclareStateOutputPort("attention", self._attn)
 
@@ -93,17 +111,26 @@ class CchpPolicy(LeafSystem):
         rng = np.random.default_rng([self._seed, int(resume_count)])
         return self.z_mu + self.z_sigma * rng.standard_normal(self._Dz)
 
+    def context_read(self, attention: np.ndarray) -> np.ndarray:
+        """r = attention . values (6): one head for all dimensions, or head d for dimension d."""
+        r = np.asarray(attention, float) @ self._values_np
+        return np.diagonal(r).copy() if r.ndim == 2 else r
+
+    def output(self, mean: np.ndarray, attention: np.ndarray) -> np.ndarray:
+        """The twist the system outputs for the module's mean and attention (module docstring)."""
+        if self.correction_weight == 1.0:
+            return np.asarray(mean, float)
+        r = self.context_read(attention)
+        return r + self.correction_weight * (np.asarray(mean, float) - r)
+
     def step(self, x, y_prev, h, c, z):
-        """One policy step in numpy: returns (mean, std, h, c, attention)."""
+        """One policy step in numpy: returns (mean, std, h, c, attention), all as the module gives them."""
         torch = self._torch
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
         with torch.no_grad():
             mean, std, h2, c2, attn = self.module.step(f32(x), f32(y_prev), f32(h), f32(c),
                                                        self._keys, self._values, f32(z))
-        attn = attn.numpy()
-        if attn.ndim == 2:
-            attn = attn.mean(axis=0)
-        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn
+        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn.numpy()
 
     def _update(self, context, discrete_state):
         get = lambda i: context.get_discrete_state(i).get_value()
@@ -118,11 +145,14 @@ class CchpPolicy(LeafSystem):
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
         mean, std, h, c, attn = self.step(x, y_prev, h, c, z)
-        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(h)) and np.all(np.isfinite(c))):
-            mean, std = np.zeros(6), np.full(6, np.inf)  # never pass a NaN on; the filter sees no motion
+        out = self.output(mean, attn)
+        if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
+                and np.all(np.isfinite(c))):
+            mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
             h, c = np.zeros_like(h), np.zeros_like(c)
         discrete_state.set_value(self._h, h)
         discrete_state.set_value(self._c, c)
         discrete_state.set_value(self._y, mean)
+        discrete_state.set_value(self._out, out)
         discrete_state.set_value(self._std, std)
-        discrete_state.set_value(self._attn, attn)
+        discrete_state.set_value(self._attn, attn.mean(axis=0) if attn.ndim == 2 else attn)

@@ -85,14 +85,9 @@ def _check_args(args) -> None:
 
 
 def _resolve_model(args, scenario) -> Path:
-    if args.model is not None:
-        return args.model
-    model = Path(scenario.policy.model)
-    if model.is_absolute() or model.exists():
-        return model
-    from rtcohand_drake.model_files import models_dir
+    from rtcohand_drake.model_files import policy_file_path
 
-    return models_dir() / model
+    return args.model if args.model is not None else policy_file_path(scenario.policy.model)
 
 
 def _context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
@@ -165,7 +160,7 @@ def _build(args, scenario, meshcat, station=None):
     else:
         raise InputError("command line: --gesture-source camera needs a live hand tracker "
                          "(pip install -e '.[camera]'); none is connected in this build")
-    policy = CchpPolicy(model, pieces, rate, seed=args.seed)
+    policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), end_time
 

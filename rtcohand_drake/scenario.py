@@ -118,6 +118,10 @@ class Policy:
     rate_hz: float = 10.0
     # Exported TorchScript policy: a path, or a file name inside models/.
     model: str = "cchp_default.pt"
+    # The twist output is r + w (mean - r), r the context read (attention . the user's own
+    # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
+    # (rtcohand_drake.policy_system).
+    correction_weight: float = 1.0
 
 
 @dc.dataclass
@@ -276,6 +280,8 @@ def _check_values(s: Scenario, source: str) -> None:
     need(all(a < b for a, b in zip(s.workspace.min_xyz, s.workspace.max_xyz)),
          "workspace: min_xyz must be below max_xyz on every axis")
     need(0 < s.policy.rate_hz <= 100, "policy.rate_hz must be in (0, 100]")
+    need(0.0 <= s.policy.correction_weight <= 1.0,
+         f"policy.correction_weight must be in [0, 1], got {s.policy.correction_weight}")
     f = s.command_filter
     need(f.mode in ("paper", "responsive"), f"command_filter.mode must be 'paper' or 'responsive', got {f.mode!r}")
     need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")

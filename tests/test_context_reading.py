@@ -102,3 +102,9 @@ def test_cli_bad_input_is_one_line(argv, expected, capsys):
     assert run_cli(cr.main, argv) == 2
     err = capsys.readouterr().err.strip()
     assert expected in err and len(err.splitlines()) == 1
+
+
+def test_the_check_reads_the_output_the_run_gives():
+    """With correction weight w the output is r + w (mean - r); the stand-in's read r is zero."""
+    readings = cr.held_out_readings(ScaledEcho(0.8), _clips(), folds=3, correction_weight=0.25)
+    assert np.allclose([r.gain for r in readings], 0.2, atol=1e-5)

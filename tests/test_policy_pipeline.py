@@ -37,34 +37,42 @@ def dataset(tmp_path_factory):
     return path
 
 
-def _offline_means(module, clip_features, pieces, z):
+def _offline_means(module, clip_features, pieces, z, with_reads=False):
+    """The module's means over a clip (its own mean fed back) and, if asked, its context reads."""
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
     keys, values, _, _ = module.encode_context(x_c, y_c, mask)
     h = torch.zeros(int(module.hidden_size))
     c = torch.zeros(int(module.hidden_size))
     y = torch.zeros(6)
-    means = []
+    means, reads = [], []
     with torch.no_grad():
         for x in clip_features:
-            y, _, h, c, _ = module.step(torch.from_numpy(x.astype(np.float32)), y, h, c, keys, values,
-                                        torch.from_numpy(z.astype(np.float32)))
+            y, _, h, c, attention = module.step(torch.from_numpy(x.astype(np.float32)), y, h, c, keys, values,
+                                                torch.from_numpy(z.astype(np.float32)))
             means.append(y.numpy().copy())
-    return np.array(means)
+            reads.append(torch.mv(values.t(), attention).numpy().copy())  # one head: sum_k a_k y_k
+    return (np.array(means), np.array(reads)) if with_reads else np.array(means)
 
 
-def test_replay_through_the_diagram_matches_the_offline_module(policy_file, dataset):
+@pytest.mark.parametrize("weight", [1.0, 0.5, 0.0])
+def test_replay_through_the_diagram_matches_the_offline_module(policy_file, dataset, weight):
+    """The policy's output is the module's mean (w = 1), the context read (w = 0) or between."""
     clips = load_policy_clips(dataset)
     target = clips[0]
     pieces = [(c.features, c.labels) for c in clips if c.user == target.user and c is not target][:5]
     scenario = load_scenario("inspection")
-    policy = CchpPolicy(policy_file, pieces, scenario.policy.rate_hz, seed=4)
+    policy = CchpPolicy(policy_file, pieces, scenario.policy.rate_hz, seed=4, correction_weight=weight)
     source = ReplayGestureSource([target], scenario.policy.rate_hz)
     run = build_run_diagram(scenario, source=source, policy=policy)
     simulator = Simulator(run.diagram)
     simulator.AdvanceTo(source.end_time)
     log = run.loggers["policy_mean"].FindLog(simulator.get_context())
     times, means = log.sample_times(), log.data().T
-    offline = _offline_means(load_policy(policy_file), target.features, pieces, policy.sample_z(0))
+    module_means, reads = _offline_means(load_policy(policy_file), target.features, pieces, policy.sample_z(0),
+                                         with_reads=True)
+    offline = weight * module_means + (1.0 - weight) * reads
+    if weight < 1.0:
+        assert np.max(np.abs(module_means - reads)) > 1e-3  # the blend is a different output
     # The log samples at each policy period; a sample at time k/rate shows the update made at (k-1)/rate.
     k = np.round(times * scenario.policy.rate_hz).astype(int)
     shown = k - 1

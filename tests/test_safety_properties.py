@@ -122,7 +122,7 @@ def harness():
     operator = SettableOperator()
     context_rng = np.random.default_rng(0)
     pieces = [(context_rng.normal(0, 0.2, (40, 36)), context_rng.normal(0, 0.05, (40, 6))) for _ in range(3)]
-    policy = CchpPolicy(model, pieces, RATE_HZ, seed=0)
+    policy = CchpPolicy(model, pieces, RATE_HZ, seed=0, correction_weight=scenario.policy.correction_weight)
     run = build_run_diagram(scenario, source=source, policy=policy, operator=operator, gesture_source="stream")
     return scenario, run, source, operator
 
