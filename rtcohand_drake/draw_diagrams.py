@@ -23,7 +23,7 @@ DIAGRAM_DIR = Path(__file__).resolve().parent.parent / "diagrams"
 
 
 def canonical_dot(text: str) -> str:
-    """Renumbers Drake's system ids (s123, cluster123..., _123) by first appearance, sorts the edges."""
+    """Renumbers Drake's system ids (s123, cluster123..., clusters123in, _123) by first appearance, sorts the edges."""
     ids: dict[str, str] = {}
 
     def renumber(match: re.Match) -> str:
@@ -31,7 +31,7 @@ def canonical_dot(text: str) -> str:
         ids.setdefault(number, str(len(ids) + 1))
         return prefix + ids[number]
 
-    text = re.sub(r"\b(s|cluster|_)(\d+)", renumber, text)
+    text = re.sub(r"\b(clusters|cluster|s|_)(\d+)", renumber, text)
     # Drake lists connections in no fixed order: sort each run of edge lines.
     lines, out, run = text.split("\n"), [], []
     for line in lines + [""]:

@@ -21,3 +21,7 @@ def test_canonical_ids_do_not_depend_on_history():
     a = canonical_dot("digraph _77 {\ns77 [x];\ns80 [y];\ns80 -> s77\ns77 -> s80\n}")
     b = canonical_dot("digraph _5 {\ns5 [x];\ns9 [y];\ns5 -> s9\ns9 -> s5\n}")
     assert a == b
+    # Port clusters carry the system id too (clusters<id>in / out).
+    c = canonical_dot("digraph _77 {\nsubgraph clusters77in {\n}\n}")
+    d = canonical_dot("digraph _932 {\nsubgraph clusters932in {\n}\n}")
+    assert c == d
