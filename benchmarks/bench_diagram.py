@@ -12,6 +12,9 @@
    exceed 10% of the clip's peak; the onset is the first supervisor command on
    the clip's active dimension, with the clip's sign, above 20% of that
    command's peak during the clip. Median over the clips, and the ratio.
+   Beside it: when the labels themselves (the handler's reaction and lag)
+   pass 20% of their peak, and when the policy's output passes the command's
+   20% level; command onset minus that is the filter's own lag.
    The mold exit corridor is switched off for this measurement: the part
    starts seated in the mold, where the corridor passes nothing but a lift,
    so with it on only lifting clips would give a command at all.
@@ -53,16 +56,19 @@ def real_time_factor(scenario, model, duration, repeats):
     return factors
 
 
-def _onset(t: np.ndarray, along: np.ndarray, t0: float) -> float | None:
-    """First time at or after t0 where `along` exceeds 20 % of its peak (None: it never goes positive)."""
+def _onset(t: np.ndarray, along: np.ndarray, t0: float, level: float | None = None) -> float | None:
+    """First time at or after t0 where `along` exceeds `level` (default: 20 % of its own peak); None if never."""
     if along.max() <= 1e-6:
         return None
-    above = np.flatnonzero((along > 0.2 * along.max()) & (t >= t0 - 1e-9))
+    level = 0.2 * along.max() if level is None else level
+    above = np.flatnonzero((along > level) & (t >= t0 - 1e-9))
     return float(t[above[0]] - t0) if len(above) else None
 
 
 def onset_latencies(scenario, model, clips, pieces, mode):
-    """Per clip: (label, policy mean, command) onsets after the gesture start, s (None where absent)."""
+    """Per clip, after the gesture start (s; None where absent): the label's and the command's onset
+    (each above 20 % of its own peak), and the policy output's onset above the command's level
+    (20 % of the command's peak), so that command - policy is the filter's own lag."""
     scenario.command_filter.mode = mode
     scenario.safety.mold_exit_height_m = 0.0  # the corridor off (module docstring)
     rate = scenario.policy.rate_hz
@@ -74,17 +80,22 @@ def onset_latencies(scenario, model, clips, pieces, mode):
         simulator = Simulator(run.diagram)
         simulator.AdvanceTo(source.end_time)
         root = simulator.get_context()
+        # A log sample at time t holds the state before that time's update: the value the
+        # system set one of its periods earlier. Times below are when each value was set.
         log = run.loggers["command_twist"].FindLog(root)
-        t, cmd = log.sample_times(), log.data().T
+        t, cmd = log.sample_times() - scenario.safety.period_s, log.data().T
         plog = run.loggers["policy_mean"].FindLog(root)
-        tp, mean = plog.sample_times(), plog.data().T
+        tp, mean = plog.sample_times() - 1.0 / rate, plog.data().T
         dim = int(clip.active_dims[0])
         sign = np.sign(clip.labels[np.argmax(np.abs(clip.labels[:, dim])), dim])
         strength = np.linalg.norm(clip.features, axis=1)
         t0 = int(np.argmax(strength > 0.1 * strength.max())) / rate
         t_label = np.arange(len(clip.labels)) / rate
-        onsets.append((_onset(t_label, sign * clip.labels[:, dim], t0), _onset(tp, sign * mean[:, dim], t0),
-                       _onset(t, sign * cmd[:, dim], t0)))
+        along = sign * cmd[:, dim]
+        level = 0.2 * along.max() if along.max() > 1e-6 else None
+        onsets.append((_onset(t_label, sign * clip.labels[:, dim], t0),
+                       _onset(tp, sign * mean[:, dim], t0, level) if level is not None else None,
+                       _onset(t, along, t0)))
     return onsets
 
 
@@ -121,7 +132,8 @@ def main():
     mr = statistics.median([v for v in commands["responsive"] if v is not None])
     print(f"onset latency (user {user}, {len(singles)} single-dimension clips), gesture start -> 20 % of peak:")
     print(f"  labels (the handler's reaction and lag): {_median_ms([o[0] for o in paper])}")
-    print(f"  policy mean: {_median_ms([o[1] for o in paper])}")
+    for name, onsets in (("paper", paper), ("responsive", responsive)):
+        print(f"  policy output above the {name} command's 20 % level: {_median_ms([o[1] for o in onsets])}")
     for name, onsets in (("paper", paper), ("responsive", responsive)):
         lag = [c - p for _, p, c in onsets if c is not None and p is not None]
         print(f"  command, {name} mode: {_median_ms(commands[name])}; the filter's own lag "

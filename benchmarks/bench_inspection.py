@@ -8,10 +8,11 @@ Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 built-in simulated operator is that user, acting in closed loop; the policy's
 context is that user's own labelled clips) and prints one table row per user
 from the run log: faces inspected, completion time, the closest approach to
-the mold walls, the peak workpiece speeds against the scenario's limits, the
+the mold walls and of the arm, gripper and part to the cell (table, mold,
+glass), the peak workpiece speeds against the scenario's limits, the
 largest joint position and speed over the model's limits, and the safety
-events. The goal: all six faces within 120 s, no mold contact and no limit
-exceeded, for at least 4 of the 5 users.
+events. The goal: all six faces within 120 s, no mold or cell contact and no
+limit exceeded, for at least 4 of the 5 users.
 
 `--intent` is a reference for the rest of the loop: the policy is replaced by
 the simulated person's own intended twist, delayed (`IntentPolicy`), so the
@@ -110,9 +111,9 @@ def main() -> int:
         policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
                   else args.model or "models/cchp_default.pt")
         print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; limits {v_lim} m/s, {w_lim} rad/s")
-        print("| user | faces | completion | mold (closest, mm) | peak v (m/s) | peak w (rad/s) "
+        print("| user | faces | completion | mold (closest, mm) | cell (closest, mm) | peak v (m/s) | peak w (rad/s) "
               "| joint q / v over limit | events |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
         successes = 0
         for user, rc, err in results:
             if rc not in (0,):
@@ -123,16 +124,20 @@ def main() -> int:
             over_q, over_v = joint_excess(scenario, log.robot_q, log.robot_v)
             clearance = float(log.extra_attrs.get("mold_min_clearance_m", np.inf))
             touched = bool(log.extra_attrs.get("mold_touched", False))
+            cell = float(log.extra_attrs.get("cell_min_clearance_m", np.inf))
+            cell_touched = bool(log.extra_attrs.get("cell_touched", False))
             kinds: dict[str, int] = {}
             for e in log.events:
                 kinds[e.kind] = kinds.get(e.kind, 0) + 1
             within = v_peak <= v_lim * 1.02 and w_peak <= w_lim * 1.02 and over_q <= 0 and over_v <= 0
-            ok = log.completed and log.completion_time <= args.duration and not touched and within
+            ok = (log.completed and log.completion_time <= args.duration and not touched and not cell_touched
+                  and within)
             successes += ok
             completion = f"{log.completion_time:.1f} s" if log.completed else "-"
             mold = ("touched" if touched else "clear") + (f" ({clearance * 1e3:.1f})" if np.isfinite(clearance) else "")
+            cell_text = ("TOUCHED" if cell_touched else "clear") + (f" ({cell * 1e3:.1f})" if np.isfinite(cell) else "")
             events = ", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"
-            print(f"| {user} | {log.faces_inspected}/6 | {completion} | {mold} | {v_peak:.3f} | {w_peak:.3f} "
+            print(f"| {user} | {log.faces_inspected}/6 | {completion} | {mold} | {cell_text} | {v_peak:.3f} | {w_peak:.3f} "
                   f"| {max(over_q, 0):.3f} / {max(over_v, 0):.3f} | {events} |")
         print(f"users completing the task safely: {successes}/{len(args.users)}")
     return 0

@@ -6,7 +6,10 @@ QP for the joint velocity that moves the workpiece centre with the commanded
 linear velocity v and turns the workpiece about its centre with the commanded
 angular velocity w (contracts §6; both given in the user frame U), subject to
 joint position limits (with a margin), joint velocity and acceleration limits,
-and a Cartesian speed limit, with joint centering in the null space.
+and a Cartesian speed limit, with joint centering in the null space. Then the
+part of the answer that would drive the arm, gripper or part into the cell
+(table, mold, glass) is removed: a robot-cell pair may close in no faster than
+its distance beyond `min_cell_clearance_m` allows (`rtcohand_drake.clearance`).
 
 Input ports
   twist_command           (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
@@ -17,8 +20,9 @@ Output ports
   follow_status           (2) [status, ratio]: status 0 = following, 1 = slowed by a
                           limit (ratio < follow_ratio_threshold), 2 = stuck, 3 = no
                           solution (the command is then zero), 4 = invalid
-                          (non-finite) twist, treated as zero; ratio = the fraction of
-                          the commanded twist that the joint velocities achieve.
+                          (non-finite) twist, treated as zero, 5 = held back from
+                          the cell (clearance); ratio = the fraction of the
+                          commanded twist that the joint velocities achieve.
 
 A zero twist means no motion at all: joint centering is switched off, so the
 arm never drifts in its null space when nobody asks it to move.
@@ -38,6 +42,7 @@ from pydrake.multibody.inverse_kinematics import (
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
+from rtcohand_drake.clearance import CellClearance, hold_clearance
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.station import make_control_plant
 
@@ -48,6 +53,7 @@ class FollowStatus(enum.IntEnum):
     STUCK = 2
     NO_SOLUTION = 3
     INVALID_INPUT = 4
+    CLEARANCE = 5
 
 
 def clamp_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -94,6 +100,7 @@ class TwistToJointVelocity(LeafSystem):
         params.set_end_effector_translational_velocity_limits(-lin, lin)
         params.set_nominal_joint_position(np.asarray(scenario.robot.q0_rad, float))
         self._params = params
+        self._clearance = CellClearance(scenario) if cfg.min_cell_clearance_m > 0 else None
         self._centering = cfg.joint_centering_gain * np.eye(n)
         self._no_centering = np.zeros((n, n))
 
@@ -139,11 +146,13 @@ class TwistToJointVelocity(LeafSystem):
         result = DoDifferentialInverseKinematics(q, v_current, V, J, self._params)
         dv = self._cfg.joint_acceleration_rad_s2 * self._dt
         if result.status == DifferentialInverseKinematicsStatus.kNoSolutionFound or result.joint_velocities is None:
-            # Stop at the acceleration limit rather than at once.
-            return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
+            # Stop at the acceleration limit rather than at once (never into the cell).
+            v_next, _ = self.keep_clear(q, v_current - np.clip(v_current, -dv, dv))
+            return v_next, FollowStatus.NO_SOLUTION, 0.0
         v_next = np.asarray(result.joint_velocities).reshape(-1)
         # The QP solver meets its bounds to a tolerance; the limits are hard, so clip.
         v_next = np.clip(v_next, v_current - dv, v_current + dv)
+        v_next, held = self.keep_clear(q, v_next)
         v_next = np.clip(v_next, -self.joint_velocity_limit, self.joint_velocity_limit)
         if not moving:
             ratio = 1.0
@@ -151,6 +160,8 @@ class TwistToJointVelocity(LeafSystem):
             ratio = float(np.dot(J @ v_next, V) / np.dot(V, V))
         if invalid:
             status = FollowStatus.INVALID_INPUT
+        elif held:
+            status = FollowStatus.CLEARANCE
         elif result.status == DifferentialInverseKinematicsStatus.kStuck:
             status = FollowStatus.STUCK
         elif ratio < self._cfg.follow_ratio_threshold:
@@ -158,6 +169,14 @@ class TwistToJointVelocity(LeafSystem):
         else:
             status = FollowStatus.FOLLOWING
         return v_next, status, ratio
+
+    def keep_clear(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, bool]:
+        """v with what would drive the robot into the cell removed; (v, whether anything was)."""
+        if self._clearance is None:
+            return v, False
+        cfg = self._cfg
+        pairs = self._clearance.close_pairs(q, cfg.cell_clearance_within_m)
+        return hold_clearance(v, pairs, cfg.min_cell_clearance_m, cfg.clearance_approach_time_s)
 
     def _update(self, context, discrete_state):
         q = self._q.Eval(context)

@@ -117,12 +117,35 @@ def mold_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 
     return best, when
 
 
+def cell_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 25.0) -> tuple[float, float, str]:
+    """Smallest signed distance (m) between the robot (arm, gripper, part) and the cell (table,
+    mold, glass) over a logged run, when, and which pair; (inf, nan, "") if never within 10 cm.
+
+    The part and the mold it starts in are left out (`mold_clearance` scores them). A value
+    <= 0 means contact.
+    """
+    from rtcohand_drake.clearance import CellClearance
+
+    clearance = CellClearance(scenario, ignore=(("workpiece", "mold"),))
+    best, when, which = float("inf"), float("nan"), ""
+    if len(times) == 0:
+        return best, when, which
+    stride = max(1, int(round(1.0 / (rate_hz * max(np.median(np.diff(times)), 1e-9))))) if len(times) > 1 else 1
+    for k in range(0, len(times), stride):
+        d, pair = clearance.min_distance(q[k])
+        if d < best:
+            best, when, which = d, float(times[k]), pair
+    return best, when, which
+
+
 def score_run_log(log, scenario) -> tuple[float, float]:
     """Fills a run log's task results: faces inspected, completion, and mold contact.
 
     Sets `completed`, `faces_inspected`, `completion_time`, the extra attributes
     `mold_touched` and `mold_min_clearance_m`, and a `mold_contact` event when
-    the part touched the walls. Returns (closest distance to the walls, its time).
+    the part touched the walls; `cell_touched`, `cell_min_clearance_m` and a
+    `cell_contact` event for the arm, gripper or part touching the table, mold
+    or glass. Returns (closest distance to the mold walls, its time).
     """
     from rtcohand_drake.station import eye_position
 
@@ -133,5 +156,9 @@ def score_run_log(log, scenario) -> tuple[float, float]:
     log.extra_attrs.update(mold_touched=bool(clearance <= 0.0), mold_min_clearance_m=clearance)
     if clearance <= 0.0:
         log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
-        log.events.sort(key=lambda e: e.time)
+    cell, cell_t, pair = cell_clearance(scenario, log.robot_time, log.robot_q)
+    log.extra_attrs.update(cell_touched=bool(cell <= 0.0), cell_min_clearance_m=cell)
+    if cell <= 0.0:
+        log.add_event(cell_t, "cell_contact", f"{pair} touched ({cell * 1e3:.1f} mm)")
+    log.events.sort(key=lambda e: e.time)
     return clearance, clearance_t

@@ -253,6 +253,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"TOUCHED the mold at {clearance_t:.1f} s" if clearance <= 0.0 else
         f"cleared the mold walls (closest {clearance * 1e3:.1f} mm)")
     print(f"mold: {near}")
+    cell = float(log.extra_attrs.get("cell_min_clearance_m", np.inf))
+    contact = next((e for e in log.events if e.kind == "cell_contact"), None)
+    print("cell (arm, gripper, part vs table, mold, glass): " + (
+        f"TOUCHED at {contact.time:.1f} s: {contact.detail}" if contact is not None else
+        f"clear (closest {cell * 1e3:.1f} mm)" if np.isfinite(cell) else "never within 10 cm"))
     kinds: dict[str, int] = {}
     for e in log.events:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1

@@ -100,6 +100,12 @@ class DiffIk:
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
+    # Clearance from the cell (table, mold, glass) for the arm, gripper and part: a pair
+    # closer than cell_clearance_within_m may shrink at most at (d - margin) / approach time,
+    # and not at all inside min_cell_clearance_m (rtcohand_drake.clearance). 0 switches it off.
+    min_cell_clearance_m: float = 0.02
+    cell_clearance_within_m: float = 0.10
+    clearance_approach_time_s: float = 0.2
 
 
 @dc.dataclass
@@ -282,6 +288,10 @@ def _check_values(s: Scenario, source: str) -> None:
     need(0 < s.policy.rate_hz <= 100, "policy.rate_hz must be in (0, 100]")
     need(0.0 <= s.policy.correction_weight <= 1.0,
          f"policy.correction_weight must be in [0, 1], got {s.policy.correction_weight}")
+    d = s.diff_ik
+    need(d.min_cell_clearance_m >= 0 and d.cell_clearance_within_m > d.min_cell_clearance_m
+         and d.clearance_approach_time_s > 0,
+         "diff_ik: need min_cell_clearance_m >= 0, cell_clearance_within_m > it, clearance_approach_time_s > 0")
     f = s.command_filter
     need(f.mode in ("paper", "responsive"), f"command_filter.mode must be 'paper' or 'responsive', got {f.mode!r}")
     need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")
