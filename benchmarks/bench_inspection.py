@@ -1,7 +1,8 @@
 """The inspection task for each out-sample user, through the run CLI itself.
 
     python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
-        [--duration 120] [--jobs 2] [--out DIR] [--filter-mode paper|responsive] [--intent [--intent-delay 0.3]]
+        [--duration 120] [--jobs 2] [--out DIR] [--seed 0] [--filter-mode paper|responsive]
+        [--intent [--intent-delay 0.3]]
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 --no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
@@ -51,7 +52,8 @@ def joint_excess(scenario, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
     log = out / f"{user}.h5"
     cmd = [sys.executable, "-m", "rtcohand_drake.run", "--scenario", args.scenario, "--realtime-rate", "0",
-           "--no-meshcat", "--user", user, "--duration", str(args.duration), "--log", str(log)]
+           "--no-meshcat", "--user", user, "--duration", str(args.duration), "--log", str(log),
+           "--seed", str(args.seed)]
     if args.model:
         cmd += ["--model", args.model]
     if args.filter_mode:
@@ -72,7 +74,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     scenario = load_scenario(args.scenario)
     if args.filter_mode:
         scenario.command_filter.mode = args.filter_mode
-    source, _ = make_builtin_operator(scenario, seed=0, user=user)
+    source, _ = make_builtin_operator(scenario, seed=args.seed, user=user)
     run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
                             gesture_source="intent")
     simulator = Simulator(run.diagram)
@@ -90,6 +92,7 @@ def main() -> int:
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0, help="the run CLI's --seed: the operators' and the policy's draws")
     p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
                    help="override the scenario's command_filter.mode (as the run CLI's flag)")
     p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
@@ -110,7 +113,8 @@ def main() -> int:
             results = list(pool.map(lambda u: one(u, args, out), args.users))
         policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
                   else args.model or "models/cchp_default.pt")
-        print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; limits {v_lim} m/s, {w_lim} rad/s")
+        print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; correction weight "
+              f"{scenario.policy.correction_weight:g}; seed {args.seed}; limits {v_lim} m/s, {w_lim} rad/s")
         print("| user | faces | completion | mold (closest, mm) | cell (closest, mm) | peak v (m/s) | peak w (rad/s) "
               "| joint q / v over limit | events |")
         print("|---|---|---|---|---|---|---|---|---|")
