@@ -2,7 +2,7 @@
 
     python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
         [--duration 120] [--jobs 2] [--out DIR] [--seed 0] [--filter-mode paper|responsive]
-        [--intent [--intent-delay 0.3]]
+        [--correction-weight W] [--population-seed N] [--intent [--intent-delay 0.3]]
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 --no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
@@ -19,6 +19,11 @@ limit exceeded, for at least 4 of the 5 users.
 the simulated person's own intended twist, delayed (`IntentPolicy`), so the
 table shows what filter, supervisor, IK and arm achieve with a policy that
 reads every gesture right.
+
+`--correction-weight W` runs a copy of the scenario with `policy.correction_weight: W`;
+`--population-seed N` takes the five out-sample users of another generated
+population (`data.generate --seed N`): people other than the benchmark's, on
+whom a setting can be chosen before the benchmark is run.
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
     log = out / f"{user}.h5"
     cmd = [sys.executable, "-m", "rtcohand_drake.run", "--scenario", args.scenario, "--realtime-rate", "0",
            "--no-meshcat", "--user", user, "--duration", str(args.duration), "--log", str(log),
-           "--seed", str(args.seed)]
+           "--seed", str(args.seed), "--population-seed", str(args.population_seed)]
     if args.model:
         cmd += ["--model", args.model]
     if args.filter_mode:
@@ -74,7 +79,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     scenario = load_scenario(args.scenario)
     if args.filter_mode:
         scenario.command_filter.mode = args.filter_mode
-    source, _ = make_builtin_operator(scenario, seed=args.seed, user=user)
+    source, _ = make_builtin_operator(scenario, seed=args.seed, user=user, population_seed=args.population_seed)
     run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
                             gesture_source="intent")
     simulator = Simulator(run.diagram)
@@ -93,6 +98,9 @@ def main() -> int:
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--seed", type=int, default=0, help="the run CLI's --seed: the operators' and the policy's draws")
+    p.add_argument("--population-seed", type=int, default=0, help="the population the operators come from")
+    p.add_argument("--correction-weight", type=float, default=None,
+                   help="run a copy of the scenario with this policy.correction_weight")
     p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
                    help="override the scenario's command_filter.mode (as the run CLI's flag)")
     p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
@@ -101,6 +109,26 @@ def main() -> int:
                         "(rtcohand_drake.operator_sim.IntentPolicy), in this process")
     p.add_argument("--intent-delay", type=float, default=0.3, help="delay of --intent (s)")
     args = p.parse_args()
+    with tempfile.TemporaryDirectory() as scenario_dir:
+        if args.correction_weight is not None:
+            args.scenario = _with_correction_weight(args.scenario, args.correction_weight, Path(scenario_dir))
+        return _run(args)
+
+
+def _with_correction_weight(scenario: str, weight: float, folder: Path) -> str:
+    """A copy of the scenario file with policy.correction_weight set."""
+    import yaml
+
+    from rtcohand_drake.scenario import resolve_scenario_path
+
+    data = yaml.safe_load(resolve_scenario_path(scenario).read_text())
+    data.setdefault("policy", {})["correction_weight"] = float(weight)
+    path = folder / f"{data.get('name', 'scenario')}_w{weight:g}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return str(path)
+
+
+def _run(args) -> int:
     scenario = load_scenario(args.scenario)
     if args.filter_mode:
         scenario.command_filter.mode = args.filter_mode

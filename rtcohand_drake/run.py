@@ -4,7 +4,7 @@
         [--duration S] [--realtime-rate R] [--no-meshcat] [--seed N]
         [--gesture-source synthetic|replay|camera|scripted]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
-        [--context-file PATH.h5 [--context-user USER]]
+        [--context-file PATH.h5 [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
         [--hardware --robot-ip IP [--dry-run]]                  # the real arm (kortex_station)
 
@@ -50,6 +50,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
     p.add_argument("--user", default=None, help="the simulated operator's user id (synthetic source)")
+    p.add_argument("--population-seed", type=int, default=None,
+                   help="the generated population the simulated operator comes from (data.generate --seed; "
+                        "default 0, the benchmark's)")
     p.add_argument("--model", type=Path, default=None, help="exported TorchScript policy (default: the scenario's)")
     p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
                    help="override the scenario's command_filter.mode")
@@ -76,6 +79,8 @@ def _check_args(args) -> None:
         raise InputError("command line: --gesture-source replay needs --gesture-file PATH.h5")
     if args.gesture_source != "replay" and (args.gesture_file is not None or args.clip is not None):
         raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
+    if args.population_seed is not None and args.gesture_source != "synthetic":
+        raise InputError("command line: --population-seed goes with the synthetic gesture source")
     if args.context_user is not None and args.context_file is None:
         raise InputError("command line: --context-user goes with --context-file")
     if args.hardware and not args.robot_ip:
@@ -154,7 +159,11 @@ def _build(args, scenario, meshcat, station=None):
     elif args.gesture_source == "synthetic":
         from rtcohand_drake.operator_sim import make_builtin_operator
 
-        source, builtin_pieces = make_builtin_operator(scenario, seed=args.seed, user=args.user)
+        from rtcohand_drake.operator_sim import POPULATION_SEED
+
+        population = POPULATION_SEED if args.population_seed is None else args.population_seed
+        source, builtin_pieces = make_builtin_operator(scenario, seed=args.seed, user=args.user,
+                                                       population_seed=population)
         pieces = (_context_pieces(args.context_file, args.context_user, rate)[0] if args.context_file
                   else builtin_pieces)
     else:

@@ -90,6 +90,7 @@ def test_malformed_yaml(tmp_path):
     (["--context-user", "u0"], "--context-user goes with --context-file"),
     (["--gesture-source", "bogus"], "invalid choice"),
     (["--seed", "x"], "invalid int value"),
+    (["--gesture-source", "scripted", "--population-seed", "2"], "--population-seed goes with the synthetic"),
 ])
 def test_bad_flags(args, fragment):
     _assert_one_line(_run(*args), fragment)
