@@ -71,18 +71,17 @@ def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: 
     """
     import torch
 
+    from rtcohand_drake.policy_system import blended_output
+
     H = int(module.hidden_size)
     h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
     x = torch.from_numpy(np.ascontiguousarray(features, np.float32))
+    values_np = values.numpy()
     out = np.zeros((len(features), 6))
     with torch.no_grad():
         for t in range(len(features)):
             y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
-            out[t] = y.numpy()
-            if correction_weight != 1.0:
-                r = (attention @ values).numpy()
-                r = np.diagonal(r) if r.ndim == 2 else r
-                out[t] = r + correction_weight * (out[t] - r)
+            out[t] = blended_output(y.numpy(), attention.numpy(), values_np, correction_weight)
     return out
 
 

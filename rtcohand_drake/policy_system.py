@@ -58,6 +58,16 @@ def pack_context(pieces, dtype=np.float32):
     return x_c, y_c, mask
 
 
+def blended_output(mean, attention, values, correction_weight: float) -> np.ndarray:
+    """r + w (mean - r), r = attention . values (one head for all dimensions, or head d for dimension d)."""
+    mean = np.asarray(mean, float)
+    if correction_weight == 1.0:
+        return mean
+    r = np.asarray(attention, float) @ np.asarray(values, float)
+    r = np.diagonal(r) if r.ndim == 2 else r
+    return r + correction_weight * (mean - r)
+
+
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
                  correction_weight: float = 1.0):
@@ -111,18 +121,6 @@ class CchpPolicy(LeafSystem):
         rng = np.random.default_rng([self._seed, int(resume_count)])
         return self.z_mu + self.z_sigma * rng.standard_normal(self._Dz)
 
-    def context_read(self, attention: np.ndarray) -> np.ndarray:
-        """r = attention . values (6): one head for all dimensions, or head d for dimension d."""
-        r = np.asarray(attention, float) @ self._values_np
-        return np.diagonal(r).copy() if r.ndim == 2 else r
-
-    def output(self, mean: np.ndarray, attention: np.ndarray) -> np.ndarray:
-        """The twist the system outputs for the module's mean and attention (module docstring)."""
-        if self.correction_weight == 1.0:
-            return np.asarray(mean, float)
-        r = self.context_read(attention)
-        return r + self.correction_weight * (np.asarray(mean, float) - r)
-
     def step(self, x, y_prev, h, c, z):
         """One policy step in numpy: returns (mean, std, h, c, attention), all as the module gives them."""
         torch = self._torch
@@ -145,7 +143,7 @@ class CchpPolicy(LeafSystem):
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
         mean, std, h, c, attn = self.step(x, y_prev, h, c, z)
-        out = self.output(mean, attn)
+        out = blended_output(mean, attn, self._values_np, self.correction_weight)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
