@@ -17,7 +17,7 @@ import time
 
 from rtcohand_drake.data.dataset import read_dataset, to_policy_clip, write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, context_need_ratio, generate_population
-from rtcohand_drake.hand_features import hand_features
+from rtcohand_drake.data.hand_features import hand_features
 
 
 def main() -> None:

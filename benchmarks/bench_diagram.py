@@ -34,17 +34,17 @@ from pydrake.systems.analysis import Simulator
 from rtcohand_drake.data.dataset import load_policy_clips, write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.diagram import build_run_diagram
-from rtcohand_drake.gestures import ReplayGestureSource
-from rtcohand_drake.model_files import models_dir
-from rtcohand_drake.operator_sim import make_builtin_operator
-from rtcohand_drake.policy_system import CchpPolicy
+from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
+from rtcohand_drake.cell.robot_files import models_dir
+from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.scenario import load_scenario
 
 
 def real_time_factor(scenario, model, duration, repeats):
     factors = []
     for seed in range(repeats):
-        source, pieces = make_builtin_operator(scenario, seed=seed)
+        source, pieces = make_builtin_person(scenario, seed=seed)
         policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=seed,
                             correction_weight=scenario.policy.correction_weight)
         run = build_run_diagram(scenario, source=source, policy=policy)

@@ -40,12 +40,12 @@ import numpy as np
 from rtcohand_drake.diagram import peak_speeds
 from rtcohand_drake.run_log import read_run_log
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.station import make_control_plant
+from rtcohand_drake.cell.plant import make_control_plant
 
 
 def joint_excess(scenario, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
     """Largest excursion beyond the joint position limits (rad) and speed limits (rad/s); <= 0: within."""
-    plant, _ = make_control_plant(scenario)
+    plant, _ = make_control_plant(scenario.cell)
     lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
     vmax = plant.GetVelocityUpperLimits()
     with np.errstate(invalid="ignore"):
@@ -72,14 +72,15 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     from pydrake.systems.analysis import Simulator
 
     from rtcohand_drake.diagram import build_run_diagram, collect_run_log
-    from rtcohand_drake.inspection import score_run_log
-    from rtcohand_drake.operator_sim import IntentPolicy, make_builtin_operator
+    from rtcohand_drake.analysis.inspection import score_run_log
+    from rtcohand_drake.analysis.reference_policies import IntentPolicy
+    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
     from rtcohand_drake.run_log import write_run_log
 
     scenario = load_scenario(args.scenario)
     if args.filter_mode:
         scenario.command_filter.mode = args.filter_mode
-    source, _ = make_builtin_operator(scenario, seed=args.seed, user=user, population_seed=args.population_seed)
+    source, _ = make_builtin_person(scenario, seed=args.seed, user=user, population_seed=args.population_seed)
     run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
                             gesture_source="intent")
     simulator = Simulator(run.diagram)
@@ -106,7 +107,7 @@ def main() -> int:
     p.add_argument("--out", default=None, help="keep the run logs here (default: a temporary folder)")
     p.add_argument("--intent", action="store_true",
                    help="reference: replace the policy by the simulated person's intended twist, delayed "
-                        "(rtcohand_drake.operator_sim.IntentPolicy), in this process")
+                        "(rtcohand_drake.systems.gestures.simulated_person.IntentPolicy), in this process")
     p.add_argument("--intent-delay", type=float, default=0.3, help="delay of --intent (s)")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as scenario_dir:

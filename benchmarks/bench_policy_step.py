@@ -32,8 +32,8 @@ def percentile_ms(times):
 def load_or_build(path: pathlib.Path):
     if path.is_file():
         return torch.jit.load(str(path)), str(path)
-    from rtcohand_drake.export import script_policy
-    from rtcohand_drake.model.cchp import Cchp
+    from rtcohand_drake.learning.export import script_policy
+    from rtcohand_drake.learning.nets.cchp import Cchp
 
     return script_policy(Cchp().eval()), "untrained default-size CCHP (no shipped model found)"
 

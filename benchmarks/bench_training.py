@@ -19,8 +19,8 @@ import time
 import numpy as np
 import torch
 
-from rtcohand_drake.model.checkpoint import build_model, read_checkpoint
-from rtcohand_drake.train import TrainConfig, data_scales, load_clips, make_batch, training_clips
+from rtcohand_drake.learning.checkpoint import build_model, read_checkpoint
+from rtcohand_drake.learning.train import TrainConfig, data_scales, load_clips, make_batch, training_clips
 
 PAPER_EPOCHS = 738
 

@@ -14,9 +14,9 @@ import argparse
 
 import torch
 
-from rtcohand_drake.model.batching import collate
-from rtcohand_drake.model.checkpoint import load_checkpoint
-from rtcohand_drake.train import load_clips
+from rtcohand_drake.learning.batching import collate
+from rtcohand_drake.learning.checkpoint import load_checkpoint
+from rtcohand_drake.learning.train import load_clips
 
 
 def probe(model, clips, n_clips: int) -> tuple[float, float, float]:

@@ -37,7 +37,7 @@ print(scenario.name, "| plant step", scenario.plant_time_step_s, "s | IK period"
 `make_sim_station` returns a Diagram with a MultibodyPlant (Gen3, gripper,
 workpiece, table, mold, glass, inspector) and named ports. The hardware
 station serves the same port names."""),
-    new_code_cell('''from rtcohand_drake.station import make_sim_station
+    new_code_cell('''from rtcohand_drake.stations.sim import make_sim_station
 station = make_sim_station(scenario)
 for i in range(station.num_input_ports()):
     print("in ", station.get_input_port(i).get_name())
@@ -48,8 +48,8 @@ print("workpiece at start (resting in the mold):", station.GetOutputPort("workpi
     new_markdown_cell("""## 2. One system alone: the differential IK
 Fix its input ports and evaluate one discrete update: the joint velocities
 that lift the workpiece straight up at 5 cm/s."""),
-    new_code_cell('''from rtcohand_drake.diff_ik import TwistToJointVelocity
-ik = TwistToJointVelocity(scenario)
+    new_code_cell('''from rtcohand_drake.systems.diff_ik import TwistToJointVelocity
+ik = TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
 ik_ctx = ik.CreateDefaultContext()
 ik.GetInputPort("twist_command").FixValue(ik_ctx, [0, 0, 0.05, 0, 0, 0])
 ik.GetInputPort("gen3.position_measured").FixValue(ik_ctx, scenario.robot.q0_rad)
@@ -115,7 +115,7 @@ results = json.loads((work / "eval" / "results.json").read_text())
 print(json.dumps(results, indent=1)[:1500])'''),
     new_code_cell('''subprocess.run([py, "-m", "rtcohand_drake.export", "--checkpoint", str(work / "cchp" / "checkpoint.pt"),
                 "--out", str(work / "policy.pt")], check=True)
-from rtcohand_drake.policy_file import load_policy
+from rtcohand_drake.learning.policy_file import load_policy
 policy = load_policy(work / "policy.pt")
 print("exported: hidden", int(policy.hidden_size), "latent", int(policy.latent_dim))'''),
 ]
@@ -133,7 +133,7 @@ import subprocess, sys, tempfile
 from pathlib import Path
 from rtcohand_drake.data.dataset import read_dataset, write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, simulate_user
-from rtcohand_drake.operator_sim import population_user_ids
+from rtcohand_drake.systems.gestures.simulated_person import population_user_ids
 work = Path(tempfile.mkdtemp())
 groups = population_user_ids()
 user_id = [u for u, g in groups.items() if g == "out-sample"][-1]
@@ -151,9 +151,9 @@ Each clip is played through the policy with the user's other clips as context (h
 the run). A gain of 1 moves the part at the speed the labels say; a gesture read well below half
 its size is worth re-recording, or replacing by a more distinct one
 (`python -m rtcohand_drake.context_reading --context-file my_clips.h5` prints the same table)."""),
-    new_code_cell('''from rtcohand_drake.context_reading import clips_from_file, held_out_readings, motion_table
-from rtcohand_drake.model_files import models_dir
-from rtcohand_drake.policy_file import load_policy
+    new_code_cell('''from rtcohand_drake.analysis.context_reading import clips_from_file, held_out_readings, motion_table
+from rtcohand_drake.cell.robot_files import models_dir
+from rtcohand_drake.learning.policy_file import load_policy
 mine, _ = clips_from_file(work / "my_clips.h5", user_id, rate_hz=10.0)
 if SHORT:
     mine = mine[::6]  # a quick look in the short mode

@@ -19,14 +19,16 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from rtcohand_drake.diff_ik import FollowStatus, TwistToJointVelocity
-from rtcohand_drake.filtering import MovingAverageDownsampler
-from rtcohand_drake.operator_panel import MeshcatOperatorPanel, ScriptedOperator
+from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity
+from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
+from rtcohand_drake.systems.operator_panel import MeshcatOperatorPanel, ScheduledOperatorPanel
 from rtcohand_drake.run_log import RunLog
-from rtcohand_drake.safety import Intervention, Mode, SafetySupervisor
+from rtcohand_drake.systems.safety.supervisor import Intervention, Mode, SafetySupervisor
 from rtcohand_drake.scenario import Scenario
-from rtcohand_drake.scripted import ScriptedTwist
-from rtcohand_drake.station import eye_position, make_sim_station
+from rtcohand_drake.systems.scripted_twist import ScriptedTwist
+from rtcohand_drake.cell.plant import eye_position
+from rtcohand_drake.stations.sim import make_sim_station
+from rtcohand_drake.interfaces import FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
 
 
 @dc.dataclass
@@ -51,72 +53,72 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     """Wires a run. Without `policy`, `source` must offer `twist_request` (default: the scenario's script)."""
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", station or make_sim_station(scenario))
-    controller = builder.AddNamedSystem("diff_ik", TwistToJointVelocity(scenario))
+    controller = builder.AddNamedSystem("diff_ik", TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s))
     R_WU = scenario.cell.user_frame.to_rigid_transform().rotation().matrix()
     command_period = (scenario.command_filter.command_period_s if scenario.command_filter.mode == "paper"
                       else 1.0 / scenario.policy.rate_hz)
     supervisor = builder.AddNamedSystem("safety", SafetySupervisor(
-        scenario.safety, scenario.workspace, R_WU, eye_position(scenario), command_period,
+        scenario.safety, scenario.workspace, R_WU, eye_position(scenario.cell), command_period,
         X_W_mold=scenario.cell.mold.to_rigid_transform()))
     if operator is None:
-        operator = MeshcatOperatorPanel(meshcat, scenario.safety) if meshcat is not None else ScriptedOperator()
+        operator = MeshcatOperatorPanel(meshcat, scenario.safety) if meshcat is not None else ScheduledOperatorPanel()
     operator = builder.AddNamedSystem("operator", operator)
     source = builder.AddNamedSystem("gesture_source" if policy is not None else "scripted_twist",
                                     source or ScriptedTwist(scenario.scripted_motion))
 
     connect = builder.Connect
-    connect(operator.GetOutputPort("operator"), supervisor.GetInputPort("operator"))
-    connect(source.GetOutputPort("gesture_status"), supervisor.GetInputPort("gesture_status"))
-    connect(station.GetOutputPort("workpiece.pose"), supervisor.GetInputPort("workpiece.pose"))
-    if source.HasInputPort("workpiece.pose"):  # a closed-loop source (the simulated operator) watches the part
-        connect(station.GetOutputPort("workpiece.pose"), source.GetInputPort("workpiece.pose"))
+    connect(operator.GetOutputPort(OPERATOR), supervisor.GetInputPort(OPERATOR))
+    connect(source.GetOutputPort(GESTURE_STATUS), supervisor.GetInputPort(GESTURE_STATUS))
+    connect(station.GetOutputPort(WORKPIECE_POSE), supervisor.GetInputPort(WORKPIECE_POSE))
+    if source.HasInputPort(WORKPIECE_POSE):  # a closed-loop source (the simulated operator) watches the part
+        connect(station.GetOutputPort(WORKPIECE_POSE), source.GetInputPort(WORKPIECE_POSE))
     command_filter = None
     if policy is not None:
         policy = builder.AddNamedSystem("cchp_policy", policy)
         command_filter = builder.AddNamedSystem(
             "moving_average", MovingAverageDownsampler(scenario.command_filter, 1.0 / scenario.policy.rate_hz))
-        connect(source.GetOutputPort("gesture_features"), policy.GetInputPort("gesture_features"))
-        connect(source.GetOutputPort("gesture_features"), supervisor.GetInputPort("gesture_features"))
-        connect(supervisor.GetOutputPort("resume_count"), policy.GetInputPort("resume_count"))
-        if policy.HasInputPort("intended_twist") and source.HasOutputPort("intended_twist"):
+        connect(source.GetOutputPort(GESTURE_FEATURES), policy.GetInputPort(GESTURE_FEATURES))
+        connect(source.GetOutputPort(GESTURE_FEATURES), supervisor.GetInputPort(GESTURE_FEATURES))
+        connect(supervisor.GetOutputPort(RESUME_COUNT), policy.GetInputPort(RESUME_COUNT))
+        if policy.HasInputPort(INTENDED_TWIST) and source.HasOutputPort(INTENDED_TWIST):
             # A reference policy (operator_sim.IntentPolicy) reads what the simulated person means.
-            connect(source.GetOutputPort("intended_twist"), policy.GetInputPort("intended_twist"))
-        connect(supervisor.GetOutputPort("resume_count"), command_filter.GetInputPort("resume_count"))
-        connect(policy.GetOutputPort("policy_mean"), command_filter.GetInputPort("policy_mean"))
-        connect(command_filter.GetOutputPort("twist_request"), supervisor.GetInputPort("twist_request"))
+            connect(source.GetOutputPort(INTENDED_TWIST), policy.GetInputPort(INTENDED_TWIST))
+        connect(supervisor.GetOutputPort(RESUME_COUNT), command_filter.GetInputPort(RESUME_COUNT))
+        connect(policy.GetOutputPort(POLICY_MEAN), command_filter.GetInputPort(POLICY_MEAN))
+        connect(command_filter.GetOutputPort(TWIST_REQUEST), supervisor.GetInputPort(TWIST_REQUEST))
     else:
-        connect(source.GetOutputPort("twist_request"), supervisor.GetInputPort("twist_request"))
-    connect(supervisor.GetOutputPort("twist_command"), controller.GetInputPort("twist_command"))
-    connect(station.GetOutputPort("gen3.position_measured"), controller.GetInputPort("gen3.position_measured"))
-    connect(controller.GetOutputPort("gen3.velocity_command"), station.GetInputPort("gen3.velocity_command"))
+        connect(source.GetOutputPort(TWIST_REQUEST), supervisor.GetInputPort(TWIST_REQUEST))
+    connect(supervisor.GetOutputPort(TWIST_COMMAND), controller.GetInputPort(TWIST_COMMAND))
+    connect(station.GetOutputPort(POSITION_MEASURED), controller.GetInputPort(POSITION_MEASURED))
+    connect(controller.GetOutputPort(VELOCITY_COMMAND), station.GetInputPort(VELOCITY_COMMAND))
 
     robot_period = 1.0 / scenario.log_rate_hz
     log = lambda port, period: LogVectorOutput(port, builder, period)
     loggers = {
-        "robot_q": log(station.GetOutputPort("gen3.position_measured"), robot_period),
-        "robot_v": log(station.GetOutputPort("gen3.velocity_estimated"), robot_period),
-        "robot_workpiece_pose": log(station.GetOutputPort("workpiece.pose"), robot_period),
-        "command_twist": log(supervisor.GetOutputPort("twist_command"), scenario.safety.period_s),
-        "safety_status": log(supervisor.GetOutputPort("status"), scenario.safety.period_s),
-        "follow_status": log(controller.GetOutputPort("follow_status"), scenario.control_period_s),
+        "robot_q": log(station.GetOutputPort(POSITION_MEASURED), robot_period),
+        "robot_v": log(station.GetOutputPort(VELOCITY_ESTIMATED), robot_period),
+        "robot_workpiece_pose": log(station.GetOutputPort(WORKPIECE_POSE), robot_period),
+        "command_twist": log(supervisor.GetOutputPort(TWIST_COMMAND), scenario.safety.period_s),
+        "safety_status": log(supervisor.GetOutputPort(SAFETY_STATUS), scenario.safety.period_s),
+        "follow_status": log(controller.GetOutputPort(FOLLOW_STATUS), scenario.control_period_s),
     }
     if policy is not None:
         policy_period = 1.0 / scenario.policy.rate_hz
-        loggers["policy_mean"] = log(policy.GetOutputPort("policy_mean"), policy_period)
-        loggers["policy_std"] = log(policy.GetOutputPort("policy_std"), policy_period)
+        loggers["policy_mean"] = log(policy.GetOutputPort(POLICY_MEAN), policy_period)
+        loggers["policy_std"] = log(policy.GetOutputPort(POLICY_STD), policy_period)
     visualizer = overlay = None
     if meshcat is not None:
-        from rtcohand_drake.meshcat_overlay import RunOverlay
+        from rtcohand_drake.systems.overlay import RunOverlay
 
         visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, station.GetOutputPort("query_object"), meshcat,
+            builder, station.GetOutputPort(QUERY_OBJECT), meshcat,
             MeshcatVisualizerParams(role=Role.kIllustration, prefix="cell"))
-        overlay = builder.AddNamedSystem("overlay", RunOverlay(meshcat, scenario))
-        connect(source.GetOutputPort("keypoints") if source.HasOutputPort("keypoints")
-                else _nan_keypoints(builder), overlay.GetInputPort("keypoints"))
-        connect(supervisor.GetOutputPort("twist_command"), overlay.GetInputPort("twist_command"))
-        connect(supervisor.GetOutputPort("status"), overlay.GetInputPort("safety_status"))
-        connect(station.GetOutputPort("workpiece.pose"), overlay.GetInputPort("workpiece.pose"))
+        overlay = builder.AddNamedSystem("overlay", RunOverlay(meshcat, scenario.cell.user_frame.to_rigid_transform()))
+        connect(source.GetOutputPort(KEYPOINTS) if source.HasOutputPort(KEYPOINTS)
+                else _nan_keypoints(builder), overlay.GetInputPort(KEYPOINTS))
+        connect(supervisor.GetOutputPort(TWIST_COMMAND), overlay.GetInputPort(TWIST_COMMAND))
+        connect(supervisor.GetOutputPort(SAFETY_STATUS), overlay.GetInputPort(SAFETY_STATUS))
+        connect(station.GetOutputPort(WORKPIECE_POSE), overlay.GetInputPort(WORKPIECE_POSE))
     diagram = builder.Build()
     diagram.set_name("rtcohand_run")
     name = gesture_source or ("scripted" if policy is None else type(source).__name__)
@@ -182,7 +184,7 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
 
 def peak_speeds(times: np.ndarray, poses: np.ndarray) -> tuple[float, float]:
     """Peak linear (m/s) and angular (rad/s) speed of the workpiece from logged poses."""
-    from rtcohand_drake.inspection import quaternion_to_matrix
+    from rtcohand_drake.analysis.inspection import quaternion_to_matrix
 
     if len(times) < 2:
         return 0.0, 0.0

@@ -53,13 +53,13 @@ def _scripted():
 
 def _gestures():
     from rtcohand_drake.diagram import build_run_diagram
-    from rtcohand_drake.model_files import models_dir
-    from rtcohand_drake.operator_sim import make_builtin_operator
-    from rtcohand_drake.policy_system import CchpPolicy
+    from rtcohand_drake.cell.robot_files import models_dir
+    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+    from rtcohand_drake.systems.policy import CchpPolicy
     from rtcohand_drake.scenario import load_scenario
 
     scenario = load_scenario("inspection")
-    source, pieces = make_builtin_operator(scenario, seed=0)
+    source, pieces = make_builtin_person(scenario, seed=0)
     policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz,
                         correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=source, policy=policy).diagram
@@ -67,7 +67,7 @@ def _gestures():
 
 def _station():
     from rtcohand_drake.scenario import load_scenario
-    from rtcohand_drake.station import make_sim_station
+    from rtcohand_drake.stations.sim import make_sim_station
 
     return make_sim_station(load_scenario("inspection"))
 

@@ -90,7 +90,7 @@ def _check_args(args) -> None:
 
 
 def _resolve_model(args, scenario) -> Path:
-    from rtcohand_drake.model_files import policy_file_path
+    from rtcohand_drake.cell.robot_files import policy_file_path
 
     return args.model if args.model is not None else policy_file_path(scenario.policy.model)
 
@@ -116,8 +116,8 @@ def _context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
 
 def _replay_source(args, scenario):
     from rtcohand_drake.data.dataset import find_clips, read_dataset, to_policy_clip
-    from rtcohand_drake.gestures import ReplayGestureSource
-    from rtcohand_drake.hand_features import resample
+    from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
+    from rtcohand_drake.data.hand_features import resample
 
     raw = sorted(read_dataset(args.gesture_file), key=lambda c: (c.user, c.clip_id))
     if args.clip is not None:
@@ -137,9 +137,9 @@ def _build(args, scenario, meshcat, station=None):
 
     if args.gesture_source == "scripted":
         return build_run_diagram(scenario, meshcat=meshcat, station=station, gesture_source="scripted"), None
-    from rtcohand_drake.policy_system import CchpPolicy
+    from rtcohand_drake.systems.policy import CchpPolicy
 
-    from rtcohand_drake.policy_file import load_policy
+    from rtcohand_drake.learning.policy_file import load_policy
 
     model_path = _resolve_model(args, scenario)
     model = load_policy(model_path)  # a bad model file fails before anything else is built
@@ -157,12 +157,12 @@ def _build(args, scenario, meshcat, station=None):
                                  "give their context with --context-file and --context-user")
             pieces, _ = _context_pieces(args.gesture_file, users[0], rate, exclude=names)
     elif args.gesture_source == "synthetic":
-        from rtcohand_drake.operator_sim import make_builtin_operator
+        from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
 
-        from rtcohand_drake.operator_sim import POPULATION_SEED
+        from rtcohand_drake.data.population import DEFAULT_SEED
 
-        population = POPULATION_SEED if args.population_seed is None else args.population_seed
-        source, builtin_pieces = make_builtin_operator(scenario, seed=args.seed, user=args.user,
+        population = DEFAULT_SEED if args.population_seed is None else args.population_seed
+        source, builtin_pieces = make_builtin_person(scenario, seed=args.seed, user=args.user,
                                                        population_seed=population)
         pieces = (_context_pieces(args.context_file, args.context_user, rate)[0] if args.context_file
                   else builtin_pieces)
@@ -187,7 +187,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from pydrake.systems.analysis import Simulator
 
     from rtcohand_drake.diagram import collect_run_log, peak_speeds
-    from rtcohand_drake.inspection import score_run_log
+    from rtcohand_drake.analysis.inspection import score_run_log
     from rtcohand_drake.run_log import write_run_log
 
     meshcat = None
@@ -198,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"Meshcat: {meshcat.web_url()}", flush=True)
     station = None
     if args.hardware:  # the session stops the arm at exit even if a step below fails (kortex_station)
-        from rtcohand_drake.kortex_station import make_kortex_station
+        from rtcohand_drake.stations.kortex import make_kortex_station
 
         station = make_kortex_station(scenario, args.robot_ip, dry_run=args.dry_run)
     try:

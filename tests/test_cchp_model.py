@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 import torch
 
-from rtcohand_drake.model.batching import collate
-from rtcohand_drake.model.blocks import gaussian_kl
-from rtcohand_drake.model.cchp import Cchp, CchpConfig
-from rtcohand_drake.model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from rtcohand_drake.model.lstm_baseline import DummyLstm
-from rtcohand_drake.model.ranp import Ranp, RanpConfig
-from rtcohand_drake.train import TrainConfig
+from rtcohand_drake.learning.batching import collate
+from rtcohand_drake.learning.nets.blocks import gaussian_kl
+from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
+from rtcohand_drake.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rtcohand_drake.learning.nets.lstm import DummyLstm
+from rtcohand_drake.learning.nets.ranp import Ranp, RanpConfig
+from rtcohand_drake.learning.train import TrainConfig
 
 SMALL = dict(hidden_size=16, finger_sizes=[6, 8, 8], hand_hidden=[16], hand_feature_size=8,
              aggregate_sizes=[16, 16], latent_trunk_sizes=[16, 16], latent_dim=4, key_size=8, output_hidden=[16])

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rtcohand_drake.clearance import CellClearance, ClosePair, hold_clearance
-from rtcohand_drake.diff_ik import FollowStatus, TwistToJointVelocity
+from rtcohand_drake.cell.clearance import CellClearance, ClosePair, hold_clearance
+from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity
 from rtcohand_drake.scenario import load_scenario
 
 
@@ -53,7 +53,7 @@ def scenario():
 
 def test_gradient_matches_finite_differences(scenario):
     """An arm pose with the upper arm over the mold (a real run's), cylinder links near boxes."""
-    clearance = CellClearance(scenario)
+    clearance = CellClearance(scenario.cell)
     q = np.array([-2.4877, -2.0395, 4.2759, -1.9847, -0.8838, -1.6013, 1.2816])
     pairs = {(p.robot, p.cell): p for p in clearance.close_pairs(q, 0.05)}
     rng = np.random.default_rng(0)
@@ -68,13 +68,13 @@ def test_gradient_matches_finite_differences(scenario):
 
 
 def test_the_part_in_the_mold_is_a_close_pair(scenario):
-    pairs = CellClearance(scenario).close_pairs(np.asarray(scenario.robot.q0_rad, float), 0.05)
+    pairs = CellClearance(scenario.cell).close_pairs(np.asarray(scenario.robot.q0_rad, float), 0.05)
     assert {p.cell for p in pairs} >= {"mold::floor", "mold::wall_px"}
     assert next(p for p in pairs if p.cell == "mold::floor").robot.startswith("workpiece")
 
 
 def test_min_distance_names_the_pair(scenario):
-    clearance = CellClearance(scenario, ignore=(("workpiece", "mold"),))
+    clearance = CellClearance(scenario.cell, ignore=(("workpiece", "mold"),))
     d, pair = clearance.min_distance(np.asarray(scenario.robot.q0_rad, float))
     assert "mold" not in pair.split(" / ")[1] or not pair.startswith("workpiece")
     assert d > 0.0
@@ -83,8 +83,8 @@ def test_min_distance_names_the_pair(scenario):
 def test_ik_keeps_the_part_clear_of_the_mold_floor_when_driven_down(scenario):
     """Lift the part out, then command it straight back down: it stops where the first robot-cell
     pair (the fingertips over the mold's wall) reaches the clearance margin."""
-    ik = TwistToJointVelocity(scenario)
-    clearance = CellClearance(scenario)
+    ik = TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
+    clearance = CellClearance(scenario.cell)
     dt = scenario.control_period_s
     q = np.asarray(scenario.robot.q0_rad, float)
     v = np.zeros(7)

@@ -1,10 +1,10 @@
-"""The held-out reading check of a user's gestures (rtcohand_drake.context_reading)."""
+"""The held-out reading check of a user's gestures (rtcohand_drake.analysis.context_reading)."""
 
 import numpy as np
 import pytest
 import torch
 
-from rtcohand_drake import context_reading as cr
+from rtcohand_drake.analysis import context_reading as cr
 from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.errors import run_cli
@@ -75,8 +75,8 @@ def test_a_clip_is_never_in_its_own_context():
 
 
 def test_cli_prints_a_row_per_motion(tmp_path, capsys):
-    from rtcohand_drake.export import script_policy
-    from rtcohand_drake.model.cchp import Cchp, CchpConfig
+    from rtcohand_drake.learning.export import script_policy
+    from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
 
     torch.manual_seed(0)
     model = Cchp(CchpConfig(hidden_size=16, aggregate_sizes=[16], latent_trunk_sizes=[16],

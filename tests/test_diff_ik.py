@@ -6,10 +6,11 @@ from pydrake.math import RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from rtcohand_drake.diff_ik import FollowStatus, TwistToJointVelocity, clamp_twist
-from rtcohand_drake.initial_pose import GEN3_HOME_RAD
+from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity, clamp_twist
+from rtcohand_drake.cell.initial_pose import GEN3_HOME_RAD
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.station import make_sim_station
+from rtcohand_drake.stations.sim import make_sim_station
+from rtcohand_drake.interfaces import FOLLOW_STATUS, POSITION_MEASURED, TWIST_COMMAND, VELOCITY_COMMAND, WORKPIECE_POSE
 
 # A posture with the workpiece in free space, well away from joint limits.
 Q_FREE = GEN3_HOME_RAD + np.deg2rad([10, 10, 0, 15, 0, -10, 0])
@@ -24,7 +25,7 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def controller(scenario):
-    return TwistToJointVelocity(scenario)
+    return TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
 
 
 def test_clamp_twist_keeps_direction():
@@ -46,10 +47,10 @@ def test_user_frame_mapping(controller, scenario):
 def _closed_loop(scenario, twist, duration):
     builder = DiagramBuilder()
     station = builder.AddSystem(make_sim_station(scenario))
-    ik = builder.AddSystem(TwistToJointVelocity(scenario))
-    builder.Connect(station.GetOutputPort("gen3.position_measured"), ik.GetInputPort("gen3.position_measured"))
-    builder.Connect(ik.GetOutputPort("gen3.velocity_command"), station.GetInputPort("gen3.velocity_command"))
-    builder.ExportInput(ik.GetInputPort("twist_command"), "twist")
+    ik = builder.AddSystem(TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s))
+    builder.Connect(station.GetOutputPort(POSITION_MEASURED), ik.GetInputPort(POSITION_MEASURED))
+    builder.Connect(ik.GetOutputPort(VELOCITY_COMMAND), station.GetInputPort(VELOCITY_COMMAND))
+    builder.ExportInput(ik.GetInputPort(TWIST_COMMAND), "twist")
     diagram = builder.Build()
     sim = Simulator(diagram)
     ctx = sim.get_mutable_context()
@@ -60,10 +61,10 @@ def _closed_loop(scenario, twist, duration):
         t = (k + 0.5) * dt  # mid-period: exactly one controller update between samples
         sim.AdvanceTo(t)
         samples.append((t,
-                        station.GetOutputPort("workpiece.pose").Eval(station.GetMyContextFromRoot(ctx)).copy(),
-                        station.GetOutputPort("gen3.position_measured").Eval(station.GetMyContextFromRoot(ctx)).copy(),
-                        ik.GetOutputPort("gen3.velocity_command").Eval(ik.GetMyContextFromRoot(ctx)).copy(),
-                        ik.GetOutputPort("follow_status").Eval(ik.GetMyContextFromRoot(ctx)).copy()))
+                        station.GetOutputPort(WORKPIECE_POSE).Eval(station.GetMyContextFromRoot(ctx)).copy(),
+                        station.GetOutputPort(POSITION_MEASURED).Eval(station.GetMyContextFromRoot(ctx)).copy(),
+                        ik.GetOutputPort(VELOCITY_COMMAND).Eval(ik.GetMyContextFromRoot(ctx)).copy(),
+                        ik.GetOutputPort(FOLLOW_STATUS).Eval(ik.GetMyContextFromRoot(ctx)).copy()))
     return ik, samples
 
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from rtcohand_drake.export import load_policy, script_policy
-from rtcohand_drake.model.batching import collate, collate_context
-from rtcohand_drake.model.cchp import Cchp, CchpConfig
-from rtcohand_drake.model.checkpoint import CheckpointError, save_checkpoint
+from rtcohand_drake.learning.export import load_policy, script_policy
+from rtcohand_drake.learning.batching import collate, collate_context
+from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
+from rtcohand_drake.learning.checkpoint import CheckpointError, save_checkpoint
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "models" / "cchp_default.pt"

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from rtcohand_drake.filtering import MovingAverageDownsampler
-from rtcohand_drake.safety import Intervention, Mode, SafetySupervisor
+from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
+from rtcohand_drake.systems.safety.supervisor import Intervention, Mode, SafetySupervisor
 from rtcohand_drake.scenario import Box, CommandFilter, Safety
+from rtcohand_drake.interfaces import GESTURE_STATUS, OPERATOR, POLICY_MEAN, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
 
 R_WU = np.diag([-1.0, -1.0, 1.0])  # the inspection cell's user frame: world turned 180 deg about z
 EYE = np.array([0.25, 1.0, 0.86])
@@ -22,10 +23,10 @@ def _filter_run(config, inputs, period=0.1):
     sim = Simulator(f, ctx)
     out = []
     for k, y in enumerate(inputs):
-        f.GetInputPort("policy_mean").FixValue(ctx, np.asarray(y, float))
-        f.GetInputPort("resume_count").FixValue(ctx, [0.0])
+        f.GetInputPort(POLICY_MEAN).FixValue(ctx, np.asarray(y, float))
+        f.GetInputPort(RESUME_COUNT).FixValue(ctx, [0.0])
         sim.AdvanceTo(k * period + period / 2)
-        out.append(f.GetOutputPort("twist_request").Eval(ctx).copy())
+        out.append(f.GetOutputPort(TWIST_REQUEST).Eval(ctx).copy())
     return np.array(out)
 
 
@@ -70,11 +71,11 @@ def _supervisor(config=None, command_period=0.5, box=BOX):
 
 
 def _fix(s, ctx, request, valid=1.0, frame_time=None, pose=INSIDE, pause=0.0, sensitivity=1.0):
-    s.GetInputPort("twist_request").FixValue(ctx, np.asarray(request, float))
+    s.GetInputPort(TWIST_REQUEST).FixValue(ctx, np.asarray(request, float))
     t = ctx.get_time() if frame_time is None else frame_time
-    s.GetInputPort("gesture_status").FixValue(ctx, [valid, t])
-    s.GetInputPort("workpiece.pose").FixValue(ctx, np.asarray(pose, float))
-    s.GetInputPort("operator").FixValue(ctx, [pause, sensitivity])
+    s.GetInputPort(GESTURE_STATUS).FixValue(ctx, [valid, t])
+    s.GetInputPort(WORKPIECE_POSE).FixValue(ctx, np.asarray(pose, float))
+    s.GetInputPort(OPERATOR).FixValue(ctx, [pause, sensitivity])
 
 
 def _advance(s, ctx, sim, seconds, **inputs):
@@ -84,7 +85,7 @@ def _advance(s, ctx, sim, seconds, **inputs):
     while ctx.get_time() < end - 1e-9:
         _fix(s, ctx, **inputs)
         sim.AdvanceTo(ctx.get_time() + 0.02)
-        out.append((s.GetOutputPort("twist_command").Eval(ctx).copy(), s.GetOutputPort("status").Eval(ctx).copy()))
+        out.append((s.GetOutputPort(TWIST_COMMAND).Eval(ctx).copy(), s.GetOutputPort(SAFETY_STATUS).Eval(ctx).copy()))
     return out
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rtcohand_drake.data.population import hand_keypoints_local, rotation_matrices
-from rtcohand_drake.hand_features import (
+from rtcohand_drake.data.hand_features import (
     FEATURE_DIM,
     PARTS,
     HandFeatureStream,

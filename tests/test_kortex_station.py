@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from rtcohand_drake import kortex_station
+from rtcohand_drake.stations import kortex as kortex_station
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.errors import InputError, run_cli
-from rtcohand_drake.fake_kortex import FakeKortexArm, FakeServerError
-from rtcohand_drake.inspection import quaternion_to_matrix
-from rtcohand_drake.kortex_station import (
+from rtcohand_drake.stations.fake_kortex_arm import FakeKortexArm, FakeServerError
+from rtcohand_drake.analysis.inspection import quaternion_to_matrix
+from rtcohand_drake.stations.kortex import (
     HardwareFault,
     KortexSession,
     deg_s_to_rad_s,
@@ -25,11 +25,11 @@ from rtcohand_drake.kortex_station import (
     wrap_to_pi,
 )
 from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.interfaces import STATION_INPUTS, STATION_OUTPUTS, POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
 
 ROBOT_IP = "192.0.2.10"  # a documentation address: nothing real answers there
-STATION_PORTS_IN = {"gen3.velocity_command"}
-STATION_PORTS_OUT = {"gen3.position_measured", "gen3.velocity_estimated", "gen3.position_commanded",
-                     "workpiece.pose", "query_object"}
+STATION_PORTS_IN = set(STATION_INPUTS)
+STATION_PORTS_OUT = set(STATION_OUTPUTS)
 
 
 @pytest.fixture(scope="module")
@@ -172,14 +172,14 @@ def test_station_ports_match_the_simulated_station(scenario):
         outs = {station.get_output_port(i).get_name() for i in range(station.num_output_ports())}
         assert ins == STATION_PORTS_IN and outs == STATION_PORTS_OUT
         context = station.CreateDefaultContext()
-        assert np.allclose(station.GetOutputPort("gen3.position_measured").Eval(context), scenario.robot.q0_rad)
+        assert np.allclose(station.GetOutputPort(POSITION_MEASURED).Eval(context), scenario.robot.q0_rad)
         # The workpiece rests in the mold at q0, as in the simulated station.
-        from rtcohand_drake.station import make_sim_station
+        from rtcohand_drake.stations.sim import make_sim_station
 
         sim = make_sim_station(scenario)
-        expected = sim.GetOutputPort("workpiece.pose").Eval(sim.CreateDefaultContext())
-        assert np.allclose(station.GetOutputPort("workpiece.pose").Eval(context), expected, atol=1e-6)
-        query = station.GetOutputPort("query_object").Eval(context)
+        expected = sim.GetOutputPort(WORKPIECE_POSE).Eval(sim.CreateDefaultContext())
+        assert np.allclose(station.GetOutputPort(WORKPIECE_POSE).Eval(context), expected, atol=1e-6)
+        query = station.GetOutputPort(QUERY_OBJECT).Eval(context)
         assert query.ComputePointPairPenetration() == []
     assert_ends_with_stop(arm)
 
@@ -191,7 +191,7 @@ def test_units_through_the_station(scenario):
     with make_kortex_station(scenario, ROBOT_IP, client_factory=arm.api, watchdog_timeout_s=10.0) as station:
         context = station.CreateDefaultContext()
         v = np.array([0.1, -0.2, 0.3, -0.05, 0.4, -0.3, 0.5])  # rad/s
-        station.GetInputPort("gen3.velocity_command").FixValue(context, v)
+        station.GetInputPort(VELOCITY_COMMAND).FixValue(context, v)
         forced_update(station, context)
         (command,) = [c.args[0] for c in arm.calls_to("base") if c.name == "SendJointSpeedsCommand"]
         assert [s.joint_identifier for s in command.joint_speeds] == list(range(7))
@@ -199,10 +199,10 @@ def test_units_through_the_station(scenario):
         assert all(s.duration == 0 for s in command.joint_speeds)
         clock.t = 0.5
         forced_update(station, context)  # reads the feedback after 0.5 s at v
-        q = station.GetOutputPort("gen3.position_measured").Eval(context)
+        q = station.GetOutputPort(POSITION_MEASURED).Eval(context)
         assert np.allclose(q, np.asarray(scenario.robot.q0_rad) + 0.5 * v)
-        assert np.allclose(station.GetOutputPort("gen3.velocity_estimated").Eval(context), v)
-        assert np.allclose(station.GetOutputPort("gen3.position_commanded").Eval(context),
+        assert np.allclose(station.GetOutputPort(VELOCITY_ESTIMATED).Eval(context), v)
+        assert np.allclose(station.GetOutputPort(POSITION_COMMANDED).Eval(context),
                            q + scenario.control_period_s * v)
 
 
@@ -211,7 +211,7 @@ def test_invalid_command_is_never_sent(scenario, bad):
     arm = FakeKortexArm(scenario.robot.q0_rad, clock=SimClock())
     with make_kortex_station(scenario, ROBOT_IP, client_factory=arm.api, watchdog_timeout_s=10.0) as station:
         context = station.CreateDefaultContext()
-        station.GetInputPort("gen3.velocity_command").FixValue(context, [bad, 0, 0, 0, 0, 0, 0])
+        station.GetInputPort(VELOCITY_COMMAND).FixValue(context, [bad, 0, 0, 0, 0, 0, 0])
         forced_update(station, context)
         assert "SendJointSpeedsCommand" not in arm.call_names()
         assert arm.call_names("base")[-1] == "Stop"
@@ -478,8 +478,8 @@ def test_exit_without_close_still_stops_the_arm():
     """An exit path that skipped close() (an uncaught exception) still ends in Stop() (atexit)."""
     script = (
         "import atexit\n"
-        "from rtcohand_drake.fake_kortex import FakeKortexArm\n"
-        "from rtcohand_drake.kortex_station import KortexSession\n"
+        "from rtcohand_drake.stations.fake_kortex_arm import FakeKortexArm\n"
+        "from rtcohand_drake.stations.kortex import KortexSession\n"
         "arm = FakeKortexArm()\n"
         "atexit.register(lambda: print(','.join(arm.call_names())))\n"  # runs after the session's hook
         f"KortexSession(arm.api(), {ROBOT_IP!r}).open().send_joint_speeds([5.0] + [0.0] * 6)\n"

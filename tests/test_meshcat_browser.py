@@ -11,7 +11,7 @@ from pydrake.systems.analysis import Simulator
 from rtcohand_drake.browser import HEADLESS_FLAGS, find_chromium, screenshot
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.station import GEN3_LINKS
+from rtcohand_drake.cell.plant import GEN3_LINKS
 
 
 def _retry(call, attempts=2):

@@ -16,8 +16,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
-from rtcohand_drake import model_files
-from rtcohand_drake.workpiece_faces import (
+from rtcohand_drake.cell import robot_files as model_files
+from rtcohand_drake.cell.faces import (
     COLOUR_RGBA, FACE_DOTS, FACES, WORKPIECE_SIZE, face_key, face_visual_name)
 
 PI = np.pi
@@ -230,7 +230,7 @@ def test_models_parse_with_no_network(tmp_path):
     script = textwrap.dedent(f"""
         from pydrake.multibody.parsing import Parser
         from pydrake.multibody.plant import MultibodyPlant
-        from rtcohand_drake import model_files
+        from rtcohand_drake.cell import robot_files as model_files
         plant = MultibodyPlant(0.0)
         parser = Parser(plant)
         parser.package_map().Remove("drake_models")

@@ -9,17 +9,18 @@ from rtcohand_drake.data.dataset import load_policy_clips
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.diagram import build_run_diagram
-from rtcohand_drake.gestures import ReplayGestureSource
-from rtcohand_drake.policy_file import PolicyFileError, load_policy
-from rtcohand_drake.policy_system import CchpPolicy, pack_context
+from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
+from rtcohand_drake.learning.policy_file import PolicyFileError, load_policy
+from rtcohand_drake.systems.policy import CchpPolicy, pack_context
 from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.interfaces import GESTURE_FEATURES, RESUME_COUNT
 
 
 @pytest.fixture(scope="module")
 def policy_file(tmp_path_factory):
     """A real TorchScript export of a (randomly initialised, small) CCHP model."""
-    from rtcohand_drake.export import script_policy
-    from rtcohand_drake.model.cchp import Cchp, CchpConfig
+    from rtcohand_drake.learning.export import script_policy
+    from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
 
     torch.manual_seed(0)
     model = Cchp(CchpConfig(hidden_size=32, aggregate_sizes=[32, 32], latent_trunk_sizes=[32, 32],
@@ -87,8 +88,8 @@ def test_policy_resamples_z_on_resume(policy_file, dataset):
     policy = CchpPolicy(policy_file, pieces, 10.0, seed=1)
     ctx = policy.CreateDefaultContext()
     z0 = ctx.get_discrete_state(4).get_value().copy()
-    policy.GetInputPort("gesture_features").FixValue(ctx, np.zeros(36))
-    policy.GetInputPort("resume_count").FixValue(ctx, [1.0])
+    policy.GetInputPort(GESTURE_FEATURES).FixValue(ctx, np.zeros(36))
+    policy.GetInputPort(RESUME_COUNT).FixValue(ctx, [1.0])
     state = policy.EvalUniquePeriodicDiscreteUpdate(ctx)
     z1 = state.get_vector(4).get_value()
     assert not np.allclose(z0, z1)
@@ -100,8 +101,8 @@ def test_policy_never_outputs_nan(policy_file, dataset):
     clips = load_policy_clips(dataset)
     policy = CchpPolicy(policy_file, [(c.features, c.labels) for c in clips[:2]], 10.0)
     ctx = policy.CreateDefaultContext()
-    policy.GetInputPort("gesture_features").FixValue(ctx, np.full(36, np.nan))
-    policy.GetInputPort("resume_count").FixValue(ctx, [0.0])
+    policy.GetInputPort(GESTURE_FEATURES).FixValue(ctx, np.full(36, np.nan))
+    policy.GetInputPort(RESUME_COUNT).FixValue(ctx, [0.0])
     state = policy.EvalUniquePeriodicDiscreteUpdate(ctx)
     assert np.all(np.isfinite(state.get_vector(2).get_value()))
 

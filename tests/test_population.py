@@ -16,7 +16,7 @@ from rtcohand_drake.data.population import (
     simulate_user,
     user_groups,
 )
-from rtcohand_drake.hand_features import FINGER_CHAINS
+from rtcohand_drake.data.hand_features import FINGER_CHAINS
 
 CONFIG = GeneratorConfig()
 

@@ -20,11 +20,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.diagram import build_run_diagram
-from rtcohand_drake.operator_panel import ScriptedOperator
-from rtcohand_drake.policy_system import CchpPolicy
-from rtcohand_drake.safety import plausible_features
+from rtcohand_drake.systems.operator_panel import ScheduledOperatorPanel
+from rtcohand_drake.systems.policy import CchpPolicy
+from rtcohand_drake.systems.safety.supervisor import plausible_features
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.station import eye_position
+from rtcohand_drake.cell.plant import eye_position
+from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, POSITION_MEASURED, VELOCITY_COMMAND
 
 EXAMPLES = int(os.environ.get("RTCOHAND_PROPERTY_EXAMPLES", "1000"))
 DURATION_S = 3.0
@@ -38,8 +39,8 @@ class StreamGestureSource(LeafSystem):
     def __init__(self):
         super().__init__()
         self.stream = (np.zeros((1, 36)), np.ones(1), np.zeros(1))
-        self.DeclareVectorOutputPort("gesture_features", 36, self._features)
-        self.DeclareVectorOutputPort("gesture_status", 2, self._status)
+        self.DeclareVectorOutputPort(GESTURE_FEATURES, 36, self._features)
+        self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._status)
 
     def _k(self, context):
         return min(int(np.floor(context.get_time() * RATE_HZ + 1e-6)), len(self.stream[0]) - 1)
@@ -52,7 +53,7 @@ class StreamGestureSource(LeafSystem):
         output.SetFromVector([self.stream[1][k], self.stream[2][k]])
 
 
-class SettableOperator(ScriptedOperator):
+class SettableOperator(ScheduledOperatorPanel):
     def set_pauses(self, pauses):
         self._pauses = list(pauses)
 
@@ -107,12 +108,12 @@ def harness():
     lift = build_run_diagram(scenario)
     sim = Simulator(lift.diagram)
     sim.AdvanceTo(6.0)
-    q_free = lift.station.GetOutputPort("gen3.position_measured").Eval(
+    q_free = lift.station.GetOutputPort(POSITION_MEASURED).Eval(
         lift.station.GetMyContextFromRoot(sim.get_context())).copy()
     scenario.robot.q0_rad = list(q_free)
     from pathlib import Path
 
-    from rtcohand_drake.model_files import models_dir
+    from rtcohand_drake.cell.robot_files import models_dir
 
     # Any exported policy can be put through the same properties: RTCOHAND_PROPERTY_MODEL=path.pt.
     model = Path(os.environ.get("RTCOHAND_PROPERTY_MODEL", models_dir() / scenario.policy.model))
@@ -158,7 +159,7 @@ def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed):
     assert np.all(np.linalg.norm(cmd[:, 3:], axis=1) <= sa.max_angular_speed_rad_s + 1e-9)
     # 2. Never a NaN at the station's input; joints within position and velocity limits.
     ik = run.controller
-    v_cmd = ik.GetOutputPort("gen3.velocity_command").Eval(ik.GetMyContextFromRoot(context))
+    v_cmd = ik.GetOutputPort(VELOCITY_COMMAND).Eval(ik.GetMyContextFromRoot(context))
     assert np.all(np.isfinite(v_cmd)) and np.all(np.isfinite(q)) and np.all(np.isfinite(v))
     lower, upper = ik.joint_position_limits
     margin = scenario.diff_ik.joint_position_margin_rad
@@ -170,7 +171,7 @@ def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed):
     lo, hi = np.array(scenario.workspace.min_xyz), np.array(scenario.workspace.max_xyz)
     p = pose[:, :3]
     assert np.all(p >= lo - 0.01) and np.all(p <= hi + 0.01)
-    assert np.all(np.linalg.norm(p - eye_position(scenario), axis=1) >= sa.min_inspector_distance_m - 0.01)
+    assert np.all(np.linalg.norm(p - eye_position(scenario.cell), axis=1) >= sa.min_inspector_distance_m - 0.01)
     # 4. A stale or invalid gesture brings the command to zero within one command period.
     period = scenario.command_filter.command_period_s
     valid, frame_time = source.stream[1], source.stream[2]

@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from rtcohand_drake.initial_pose import solve_initial_q, workpiece_rest_pose
+from rtcohand_drake.cell.initial_pose import solve_initial_q, workpiece_rest_pose
 from rtcohand_drake.run_log import read_run_log
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.station import make_control_plant, make_sim_station
+from rtcohand_drake.cell.plant import make_control_plant
+from rtcohand_drake.stations.sim import make_sim_station
+from rtcohand_drake.interfaces import STATION_INPUTS, STATION_OUTPUTS, POSITION_MEASURED, QUERY_OBJECT, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
 
-STATION_PORTS_IN = {"gen3.velocity_command"}
-STATION_PORTS_OUT = {"gen3.position_measured", "gen3.velocity_estimated", "gen3.position_commanded",
-                     "workpiece.pose", "query_object"}
+STATION_PORTS_IN = set(STATION_INPUTS)
+STATION_PORTS_OUT = set(STATION_OUTPUTS)
 
 
 @pytest.fixture(scope="module")
@@ -37,11 +38,11 @@ def test_station_ports(station):
 
 def test_initial_posture_rests_part_in_mold_without_contact(scenario, station):
     context = station.CreateDefaultContext()
-    pose = station.GetOutputPort("workpiece.pose").Eval(context)
-    plant, instances = make_control_plant(scenario)
+    pose = station.GetOutputPort(WORKPIECE_POSE).Eval(context)
+    plant, instances = make_control_plant(scenario.cell)
     X_rest = workpiece_rest_pose(plant, plant.CreateDefaultContext(), instances["mold"])
     assert np.allclose(pose[:3], X_rest.translation(), atol=1e-3)
-    query = station.GetOutputPort("query_object").Eval(context)
+    query = station.GetOutputPort(QUERY_OBJECT).Eval(context)
     assert query.ComputePointPairPenetration() == []
     inspector = query.inspector()
     walls = [d.distance for d in query.ComputeSignedDistancePairwiseClosestPoints(0.02)
@@ -53,7 +54,7 @@ def test_initial_posture_rests_part_in_mold_without_contact(scenario, station):
 def test_scenario_q0_is_the_solved_rest_posture(scenario):
     """q0 in the YAML file agrees with the IK for the file's mold pose (re-run initial_pose if not)."""
     q = solve_initial_q(scenario, scenario.robot.q0_rad)
-    plant, instances = make_control_plant(scenario)
+    plant, instances = make_control_plant(scenario.cell)
     ctx = plant.CreateDefaultContext()
     frame = plant.GetFrameByName("workpiece", instances["workpiece"])
     plant.SetPositions(ctx, q)
@@ -65,19 +66,19 @@ def test_scenario_q0_is_the_solved_rest_posture(scenario):
 
 def test_zero_command_holds_still(station, scenario):
     context = station.CreateDefaultContext()
-    station.GetInputPort("gen3.velocity_command").FixValue(context, np.zeros(7))
+    station.GetInputPort(VELOCITY_COMMAND).FixValue(context, np.zeros(7))
     Simulator(station, context).AdvanceTo(2.0)
-    q = station.GetOutputPort("gen3.position_measured").Eval(context)
-    v = station.GetOutputPort("gen3.velocity_estimated").Eval(context)
+    q = station.GetOutputPort(POSITION_MEASURED).Eval(context)
+    v = station.GetOutputPort(VELOCITY_ESTIMATED).Eval(context)
     assert np.allclose(q, scenario.robot.q0_rad, atol=1e-4)
     assert np.allclose(v, 0.0, atol=1e-4)
 
 
 def test_nan_velocity_command_is_no_motion(station, scenario):
     context = station.CreateDefaultContext()
-    station.GetInputPort("gen3.velocity_command").FixValue(context, np.full(7, np.nan))
+    station.GetInputPort(VELOCITY_COMMAND).FixValue(context, np.full(7, np.nan))
     Simulator(station, context).AdvanceTo(0.5)
-    q = station.GetOutputPort("gen3.position_measured").Eval(context)
+    q = station.GetOutputPort(POSITION_MEASURED).Eval(context)
     assert np.all(np.isfinite(q)) and np.allclose(q, scenario.robot.q0_rad, atol=1e-4)
 
 
@@ -85,16 +86,16 @@ def test_velocity_command_is_tracked(scenario):
     """In free space (the part lifted clear of the mold), joint velocities are tracked."""
     import copy
 
-    from rtcohand_drake.initial_pose import GEN3_HOME_RAD
+    from rtcohand_drake.cell.initial_pose import GEN3_HOME_RAD
 
     free = copy.deepcopy(scenario)
     free.robot.q0_rad = list(GEN3_HOME_RAD)
     station = make_sim_station(free)
     context = station.CreateDefaultContext()
     v_cmd = np.array([0.1, -0.05, 0.0, 0.05, 0.0, 0.1, 0.2])
-    station.GetInputPort("gen3.velocity_command").FixValue(context, v_cmd)
+    station.GetInputPort(VELOCITY_COMMAND).FixValue(context, v_cmd)
     Simulator(station, context).AdvanceTo(1.0)
-    v = station.GetOutputPort("gen3.velocity_estimated").Eval(context)
+    v = station.GetOutputPort(VELOCITY_ESTIMATED).Eval(context)
     assert np.allclose(v, v_cmd, atol=0.01)
 
 
@@ -140,7 +141,7 @@ def test_run_cli_bad_arguments(args, expected):
 
 
 def test_mold_clearance_sees_wall_contact(scenario):
-    from rtcohand_drake.inspection import mold_clearance
+    from rtcohand_drake.analysis.inspection import mold_clearance
 
     q0 = np.asarray(scenario.robot.q0_rad)
     resting, _ = mold_clearance(scenario, np.array([0.0]), q0[None])

@@ -1,4 +1,4 @@
-"""Writes workpiece.sdf from rtcohand_drake.workpiece_faces (the face order,
+"""Writes workpiece.sdf from rtcohand_drake.cell.faces (the face order,
 colours and dot counts live there).
 
     /work/venv/bin/python models/workpiece/make_workpiece_sdf.py
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from rtcohand_drake.workpiece_faces import (
+from rtcohand_drake.cell.faces import (
     COLOUR_RGBA, FACE_DOTS, FACES, WORKPIECE_SIZE, face_key, face_visual_name)
 
 MASS_KG = 0.8  # thin-walled aluminium casting (a solid block would be 2.0 kg); keeps the wrist within its 9 N·m

@@ -31,7 +31,7 @@ from typing import Iterable
 import numpy as np
 
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.hand_features import frame_times, hand_features, resample
+from rtcohand_drake.data.hand_features import frame_times, hand_features, resample
 
 FORMAT = "rtcohand-gestures"
 VERSION = 1

@@ -21,7 +21,7 @@ import numpy as np
 
 from rtcohand_drake.data.dataset import Clip
 from rtcohand_drake.data.population import integrate_pose
-from rtcohand_drake.hand_features import FINGER_CHAINS
+from rtcohand_drake.data.hand_features import FINGER_CHAINS
 
 BONES = [(0, int(c[0])) for c in FINGER_CHAINS] + [
     (int(c[i]), int(c[i + 1])) for c in FINGER_CHAINS for i in range(3)

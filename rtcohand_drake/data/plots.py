@@ -13,7 +13,7 @@ import sys
 import numpy as np
 
 from rtcohand_drake.data.dataset import DIMENSIONS, Clip, DatasetError, find_clips, read_dataset, to_policy_clip
-from rtcohand_drake.hand_features import FINGER_CHAINS, PARTS
+from rtcohand_drake.data.hand_features import FINGER_CHAINS, PARTS
 
 # Bones of the 21-point skeleton: each finger chain from the wrist, plus the palm's knuckle line.
 BONES = [(0, int(c[0])) for c in FINGER_CHAINS] + [

@@ -74,7 +74,7 @@ from typing import Sequence
 import numpy as np
 
 from rtcohand_drake.data.dataset import PolicyClip
-from rtcohand_drake.hand_features import FEATURE_DIM, PARTS
+from rtcohand_drake.data.hand_features import FEATURE_DIM, PARTS
 
 SETTINGS = ("D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy")
 NOISY_SIGMA_T = 0.05  # m/s, on linear-velocity entries

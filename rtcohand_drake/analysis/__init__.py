@@ -1,0 +1,1 @@
+"""Measuring runs and policies: inspection scoring, the context-reading check, reference policies."""

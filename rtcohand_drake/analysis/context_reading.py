@@ -1,0 +1,234 @@
+"""How well the policy reads each of a user's gestures, from that user's own labelled clips.
+
+    python -m rtcohand_drake.context_reading --context-file PATH.h5 [--context-user USER] [--model PATH.pt]
+    python -m rtcohand_drake.context_reading --user u10      # a built-in simulated user
+
+Before a new person drives the arm, their labelled clips can tell how well
+the policy will read them. The clips are split into `folds` groups; each group
+is played through the exported policy (contracts §5) with the other groups as
+context, exactly as the run diagram runs it (zero start state, own mean fed
+back, z = the mean of q(z|C)). For each active dimension of each clip the
+*reading gain* is the mean predicted twist on that dimension over the steps
+where its label is above 30 % of its peak, divided by the label's mean there:
+1 reads the gesture at its full size, 0.2 moves the part at a fifth of the
+speed the person meant, a negative gain moves it the wrong way.
+
+The table lists the 12 motions (dimension and sign) with the median gain of
+their clips and a verdict: `reads` (>= 0.5), `weak` (0.2 .. 0.5), `poor`
+(< 0.2, or the wrong way). A poorly read gesture is worth re-recording or
+replacing by a more distinct one before the session. The last lines give the
+median gain over all clips and the held-out squared error of the output as a
+share of commanding zero twist (the "Own" evaluation setting, in six folds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses as dc
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from rtcohand_drake.errors import InputError, run_cli
+
+MOTION_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+READS, WEAK = 0.5, 0.2  # verdict thresholds on the reading gain
+ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
+
+
+@dc.dataclass
+class LabelledClip:
+    """A clip at the policy rate: features (T, 36), labels (T, 6), its active dimensions."""
+
+    name: str
+    features: np.ndarray
+    labels: np.ndarray
+    active_dims: tuple[int, ...]
+
+
+@dc.dataclass
+class ClipReading:
+    name: str
+    dim: int
+    sign: int  # of the label on the active dimension
+    gain: float  # mean prediction / mean label on the active steps
+
+
+def motion_name(dim: int, sign: int) -> str:
+    return MOTION_NAMES[dim] + ("+" if sign > 0 else "-")
+
+
+def verdict(gain: float) -> str:
+    return "reads" if gain >= READS else "weak" if gain >= WEAK else "poor"
+
+
+def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: float = 1.0) -> np.ndarray:
+    """The policy's output twists (T, 6) over one clip from a zero state, the module's own mean fed back.
+
+    The output is r + w (mean - r), r the context read, as `policy_system.CchpPolicy` gives it.
+    """
+    import torch
+
+    from rtcohand_drake.systems.policy import blended_output
+
+    H = int(module.hidden_size)
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    x = torch.from_numpy(np.ascontiguousarray(features, np.float32))
+    values_np = values.numpy()
+    out = np.zeros((len(features), 6))
+    with torch.no_grad():
+        for t in range(len(features)):
+            y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
+            out[t] = blended_output(y.numpy(), attention.numpy(), values_np, correction_weight)
+    return out
+
+
+def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
+                   correction_weight: float = 1.0) -> list[np.ndarray]:
+    """The policy's output (T, 6) over every clip, each played with the other folds as context."""
+    import torch
+
+    from rtcohand_drake.systems.policy import pack_context
+
+    if len(clips) < 2:
+        raise ValueError("need at least two labelled clips (one to play, one as context)")
+    folds = max(2, min(folds, len(clips)))
+    means: list = [None] * len(clips)
+    for f in range(folds):
+        x_c, y_c, mask = pack_context([(c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
+        with torch.no_grad():
+            keys, values, z_mu, _ = module.encode_context(
+                torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
+        for i in range(f, len(clips), folds):
+            means[i] = play_clip(module, clips[i].features, keys, values, z_mu, correction_weight)
+    return means
+
+
+def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6, correction_weight: float = 1.0,
+                      means: Sequence[np.ndarray] | None = None) -> list[ClipReading]:
+    """The reading gain on each active dimension of every clip, played with the other folds as context
+    (or read from `means`, the output of `held_out_means`, when given)."""
+    if means is None:
+        means = held_out_means(module, clips, folds, correction_weight)
+    readings = []
+    for clip, means in zip(clips, means):
+        for d in clip.active_dims:
+            label = clip.labels[:, d]
+            peak = np.max(np.abs(label))
+            if peak <= 0:
+                continue
+            active = np.abs(label) > ACTIVE_SHARE * peak
+            along = float(label[active].mean())
+            readings.append(ClipReading(clip.name, int(d), int(np.sign(along)), float(means[active, d].mean() / along)))
+    return readings
+
+
+def motion_table(readings: Sequence[ClipReading]) -> list[tuple[str, int, float, str]]:
+    """(motion, clips, median gain, verdict) for each motion with clips, in Tx+ Tx- ... Rz- order."""
+    rows = []
+    for d in range(6):
+        for sign in (1, -1):
+            gains = [r.gain for r in readings if r.dim == d and r.sign == sign]
+            if gains:
+                g = float(np.median(gains))
+                rows.append((motion_name(d, sign), len(gains), g, verdict(g)))
+    return rows
+
+
+def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[LabelledClip], str]:
+    from rtcohand_drake.data.dataset import DatasetError, load_policy_clips
+
+    try:
+        clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
+    except DatasetError as err:
+        raise InputError(str(err)) from None
+    users = sorted({c.user for c in clips})
+    if not clips:
+        raise InputError(f"{path}: no labelled clips")
+    if user is None:
+        if len(users) > 1:
+            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user")
+        user = users[0]
+    mine = [LabelledClip(c.name, c.features, c.labels, tuple(int(d) for d in c.active_dims))
+            for c in clips if c.user == user]
+    if len(mine) < 2:
+        raise InputError(f"{path}: user {user!r} has {len(mine)} labelled clips; at least 2 are needed")
+    return mine, user
+
+
+def builtin_clips(user: str, rate_hz: float) -> list[LabelledClip]:
+    """The labelled clips of a built-in simulated user (as `operator_sim.make_builtin_person` makes them)."""
+    from rtcohand_drake.data.dataset import to_policy_clip
+    from rtcohand_drake.data.population import GeneratorConfig, simulate_user
+    from rtcohand_drake.data.population import DEFAULT_SEED
+    from rtcohand_drake.systems.gestures.simulated_person import population_user_ids
+
+    ids = population_user_ids()
+    if user not in ids:
+        raise InputError(f"--user: unknown user {user!r}; valid ids: {', '.join(ids)}")
+    _, raw, _ = simulate_user(GeneratorConfig(), list(ids).index(user), ids[user], DEFAULT_SEED)
+    out = []
+    for clip in raw:
+        pc = to_policy_clip(clip, rate_hz)
+        out.append(LabelledClip(pc.name, pc.features, pc.labels, tuple(int(d) for d in clip.active_dims)))
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.context_reading", description=__doc__.splitlines()[0])
+    p.add_argument("--context-file", type=Path, default=None, help="dataset file with the user's labelled clips")
+    p.add_argument("--context-user", default=None, help="which user of --context-file")
+    p.add_argument("--user", default=None, help="a built-in simulated user instead (u00 .. u14)")
+    p.add_argument("--scenario", default="inspection",
+                   help="scenario whose policy settings (model, correction_weight) are checked")
+    p.add_argument("--model", type=Path, default=None, help="exported policy (default: the scenario's)")
+    p.add_argument("--correction-weight", type=float, default=None,
+                   help="w of the policy's output r + w (mean - r) (default: the scenario's)")
+    p.add_argument("--folds", type=int, default=6)
+    p.add_argument("--rate-hz", type=float, default=10.0)
+    args = p.parse_args(argv)
+    if (args.context_file is None) == (args.user is None):
+        raise InputError("command line: give either --context-file (with --context-user) or --user")
+    if args.folds < 2:
+        raise InputError("command line: --folds must be >= 2")
+    from rtcohand_drake.cell.robot_files import policy_file_path
+    from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    weight = scenario.policy.correction_weight if args.correction_weight is None else args.correction_weight
+    if not 0.0 <= weight <= 1.0:
+        raise InputError(f"command line: --correction-weight must be in [0, 1], got {weight}")
+    model = args.model or policy_file_path(scenario.policy.model)
+    module = load_policy(model)
+    if args.user is not None:
+        clips, who = builtin_clips(args.user, args.rate_hz), args.user
+    else:
+        clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz)
+    means = held_out_means(module, clips, args.folds, weight)
+    readings = held_out_readings(module, clips, means=means)
+    error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(means, clips))
+    zero = sum(float((c.labels ** 2).sum()) for c in clips)
+    rows = motion_table(readings)
+    print(f"user {who}: {len(clips)} labelled clips, each read with the other {args.folds - 1} "
+          f"of {args.folds} folds as context; policy {model.name}, correction weight {weight:g}")
+    print("| motion | clips | reading gain (median) | verdict |")
+    print("|---|---|---|---|")
+    for name, n, gain, word in rows:
+        print(f"| {name} | {n} | {gain:+.2f} | {word} |")
+    print(f"median reading gain over all {len(readings)} clip motions: "
+          f"{np.median([r.gain for r in readings]):+.2f}")
+    print(f"held-out squared error over all clips: {error / max(zero, 1e-12):.3f} of commanding zero twist")
+    weak = [name for name, _, gain, _ in rows if gain < READS]
+    print("read below half their size: " + (", ".join(weak) if weak else "none"))
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.context_reading"))
+
+
+if __name__ == "__main__":
+    entry_point()

@@ -1,0 +1,164 @@
+"""The inspection task, measured from the workpiece's trajectory.
+
+A face counts as inspected when its outward normal points within
+`max_angle_deg` (35 degrees) of the direction from the workpiece centre to
+the inspector's eye, continuously for at least `hold_s` (0.5 s). The task is
+complete when all six faces have been inspected; its completion time is the
+moment the last face's hold is over.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+
+import numpy as np
+from pydrake.geometry import Role
+
+from rtcohand_drake.cell.faces import FACES
+
+
+@dc.dataclass
+class InspectionResult:
+    inspected_at: dict  # face name -> time (s) its hold completed, or NaN
+    faces_inspected: int
+    completed: bool
+    completion_time: float
+
+
+def quaternion_to_matrix(wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrices (K,3,3) from unit quaternions (K,4) [w x y z]."""
+    q = np.asarray(wxyz, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def face_angles_deg(poses: np.ndarray, eye_xyz) -> np.ndarray:
+    """(K, 6) angle between each face's outward normal and the line of sight to the eye."""
+    poses = np.atleast_2d(np.asarray(poses, float))
+    R = quaternion_to_matrix(poses[:, 3:7])
+    to_eye = np.asarray(eye_xyz, float) - poses[:, :3]
+    to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
+    normals_E = np.array([face[1] for face in FACES], float)  # (6, 3)
+    normals_W = np.einsum("kij,fj->kfi", R, normals_E)
+    cos = np.clip(np.einsum("kfi,ki->kf", normals_W, to_eye), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def measure_inspection(times: np.ndarray, poses: np.ndarray, eye_xyz,
+                       max_angle_deg: float = 35.0, hold_s: float = 0.5) -> InspectionResult:
+    times = np.asarray(times, float)
+    inspected_at = {face[0]: float("nan") for face in FACES}
+    if len(times):
+        visible = face_angles_deg(poses, eye_xyz) <= max_angle_deg
+        for f, face in enumerate(FACES):
+            start = None
+            for k, t in enumerate(times):
+                if visible[k, f]:
+                    start = t if start is None else start
+                    if t - start >= hold_s:
+                        inspected_at[face[0]] = float(t)
+                        break
+                else:
+                    start = None
+    done = [t for t in inspected_at.values() if np.isfinite(t)]
+    completed = len(done) == len(FACES)
+    return InspectionResult(inspected_at, len(done), completed, max(done) if completed else float("nan"))
+
+
+def mold_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 25.0) -> tuple[float, float]:
+    """Smallest signed distance (m) between the workpiece and the mold's walls while close, and when.
+
+    Replays the logged joint angles through the cell's geometry (Drake's
+    SceneGraph signed-distance queries), at `rate_hz`. A value <= 0 means the
+    part touched the mold. Returns (min distance, its time); (inf, nan) if
+    the part was never within 5 cm of the mold.
+    """
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+
+    from rtcohand_drake.cell.plant import add_cell_models
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    instances = add_cell_models(plant, scenario.cell)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyContextFromRoot(context)
+    sg_context = scene_graph.GetMyContextFromRoot(context)
+    inspector = scene_graph.model_inspector()
+
+    def geometries(name):
+        ids = []
+        for body in plant.GetBodyIndices(instances[name]):
+            frame = plant.GetBodyFrameIdOrThrow(body)
+            ids += list(inspector.GetGeometries(frame, Role.kProximity))
+        return ids
+
+    part = geometries("workpiece")
+    mold = [g for g in geometries("mold") if "wall" in inspector.GetName(g)]  # the cavity walls, not its floor
+    best, when = float("inf"), float("nan")
+    if len(times) == 0:
+        return best, when
+    stride = max(1, int(round(1.0 / (rate_hz * max(np.median(np.diff(times)), 1e-9))))) if len(times) > 1 else 1
+    for k in range(0, len(times), stride):
+        plant.SetPositions(plant_context, q[k])
+        query = scene_graph.get_query_output_port().Eval(sg_context)
+        for a in part:
+            for b in mold:
+                d = query.ComputeSignedDistancePairClosestPoints(a, b).distance
+                if d < 0.05 and d < best:
+                    best, when = float(d), float(times[k])
+    return best, when
+
+
+def cell_clearance(scenario, times: np.ndarray, q: np.ndarray, rate_hz: float = 25.0) -> tuple[float, float, str]:
+    """Smallest signed distance (m) between the robot (arm, gripper, part) and the cell (table,
+    mold, glass) over a logged run, when, and which pair; (inf, nan, "") if never within 10 cm.
+
+    The part and the mold it starts in are left out (`mold_clearance` scores them). A value
+    <= 0 means contact.
+    """
+    from rtcohand_drake.cell.clearance import CellClearance
+
+    clearance = CellClearance(scenario.cell, ignore=(("workpiece", "mold"),))
+    best, when, which = float("inf"), float("nan"), ""
+    if len(times) == 0:
+        return best, when, which
+    stride = max(1, int(round(1.0 / (rate_hz * max(np.median(np.diff(times)), 1e-9))))) if len(times) > 1 else 1
+    for k in range(0, len(times), stride):
+        d, pair = clearance.min_distance(q[k])
+        if d < best:
+            best, when, which = d, float(times[k]), pair
+    return best, when, which
+
+
+def score_run_log(log, scenario) -> tuple[float, float]:
+    """Fills a run log's task results: faces inspected, completion, and mold contact.
+
+    Sets `completed`, `faces_inspected`, `completion_time`, the extra attributes
+    `mold_touched` and `mold_min_clearance_m`, and a `mold_contact` event when
+    the part touched the walls; `cell_touched`, `cell_min_clearance_m` and a
+    `cell_contact` event for the arm, gripper or part touching the table, mold
+    or glass. Returns (closest distance to the mold walls, its time).
+    """
+    from rtcohand_drake.cell.plant import eye_position
+
+    result = measure_inspection(log.robot_time, log.robot_workpiece_pose, eye_position(scenario.cell))
+    log.completed, log.faces_inspected, log.completion_time = (
+        result.completed, result.faces_inspected, result.completion_time)
+    clearance, clearance_t = mold_clearance(scenario, log.robot_time, log.robot_q)
+    log.extra_attrs.update(mold_touched=bool(clearance <= 0.0), mold_min_clearance_m=clearance)
+    if clearance <= 0.0:
+        log.add_event(clearance_t, "mold_contact", f"the workpiece touched the mold ({clearance * 1e3:.1f} mm)")
+    cell, cell_t, pair = cell_clearance(scenario, log.robot_time, log.robot_q)
+    log.extra_attrs.update(cell_touched=bool(cell <= 0.0), cell_min_clearance_m=cell)
+    if cell <= 0.0:
+        log.add_event(cell_t, "cell_contact", f"{pair} touched ({cell * 1e3:.1f} mm)")
+    log.events.sort(key=lambda e: e.time)
+    return clearance, clearance_t

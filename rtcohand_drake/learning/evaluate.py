@@ -1,0 +1,435 @@
+"""Evaluate trained policies on the six test settings of the paper (contracts §3).
+
+    python -m rtcohand_drake.evaluate --data PATH.h5 --checkpoint CKPT [CKPT ...] --out DIR
+        [--names NAME ...] [--seed 0] [--settings S ...] [--noise-sweep] [--spectrum] [--attention]
+
+`--settings ... Own` adds the deployed setting (out-sample targets, the
+user's own other clips as context; `rtcohand_drake.data.sampling`).
+
+Checkpoints that share a name (by default derived from the model kind and its
+training options, e.g. "CCHP", "CCHP p_TF=0.9", "RANP", "Dummy LSTM") are
+seeds of one model: their metrics are averaged, with the standard deviation
+over seeds.
+
+Metrics per setting, averaged over the setting's episodes:
+- elbo_loss: -ELBO per target clip (sum over steps and motion dimensions of
+  -log N(y; mean, std) in physical units, plus KL(q(z|C,T) || q(z|C))), with
+  the previous output fed back from the model's own mean (no teacher forcing)
+  and one z drawn from q(z|C,T). For the Dummy LSTM it is the NLL (no latent).
+- mse: mean over steps and the 6 motion dimensions of (y - mean)^2, in
+  (m/s)^2 and (rad/s)^2, free-running, z = the mean of q(z|C).
+
+Writes DIR/results.json, DIR/results.md, and with the options the figures
+noise_sweep.png, spectrum.png, attention.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pathlib
+import sys
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch
+
+from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.learning.batching import collate
+from rtcohand_drake.data.sampling import ALL_SETTINGS, SETTINGS
+from rtcohand_drake.learning.checkpoint import load_checkpoint
+
+NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
+MAX_SIGMA_T = 0.05  # m/s
+MAX_SIGMA_R = 0.1  # rad/s
+HIGH_FREQ_HZ = 1.0  # "high-frequency content": power above this, as a fraction of the total
+
+# The paper's Table "Test losses" (its own data): (ELBO loss, MSE); None = NA.
+PAPER_TABLE = {
+    "Dummy LSTM": [(None, 4.89), None, None, None, (-360.35, 5.48), (None, 5.38)],
+    "RANP": [(-410.66, 1.66), (-401.42, 1.95), (-400.76, 1.96), (-400.71, 1.96), (-369.26, 2.54), (-288.59, 4.84)],
+    "CCHP": [(-634.45, 1.4), (-566.96, 1.62), (-558.65, 1.62), (-556.71, 1.63), (-346.86, 2.26), (-273.71, 2.28)],
+    "CCHP p_TF=0.9": [(9512.59, 8.92), (10554.34, 9.37), (11120.19, 9.37), (11050.91, 9.4), (10000.92, 9.14),
+                      (10354.68, 9.15)],
+    "CCHP p_TF=0.5": [(-323.25, 1.71), (-172.0, 1.99), (-135.91, 2.01), (-143.76, 2.01), (50.87, 2.64), (721.69, 3.58)],
+    "CCHP p_TF=0.1": [(-270.68, 1.96), (-58.68, 2.28), (-51.03, 2.32), (-50.26, 2.32), (248.07, 2.9), (805.37, 3.24)],
+    "CCHP (p_D,p_U)=(0.1,0.1)": [(-601.4, 1.43), (-538.96, 1.66), (-537.42, 1.66), (-537.22, 1.66), (-350.8, 2.26),
+                                 (-191.37, 2.41)],
+    "CCHP (p_D,p_U)=(0.75,0.75)": [(-611.87, 1.36), (-538.34, 1.62), (-498.34, 1.68), (-495.1, 1.7), (-370.33, 2.31),
+                                   (-222.07, 2.25)],
+    "CCHP (p_D,p_U)=(1,1)": [(-239.82, 1.8), (-13.61, 2.29), (577.09, 2.95), (618.49, 3.04), (465.95, 3.01),
+                             (121.30, 2.52)],
+}
+
+
+def model_name(payload: Dict) -> str:
+    """A readable name from the checkpoint's kind and training options."""
+    kind = payload["kind"]
+    tc = payload.get("train_config", {})
+    if kind == "lstm":
+        return "Dummy LSTM"
+    if kind == "ranp":
+        return "RANP"
+    name = "CCHP"
+    sched = tc.get("tf_schedule", "curriculum")
+    if sched.startswith("fixed:"):
+        name += f" p_TF={float(sched.split(':', 1)[1]):g}"
+    p_d, p_u = tc.get("p_d", 0.5), tc.get("p_u", 0.5)
+    if (p_d, p_u) != (0.5, 0.5):
+        name += f" (p_D,p_U)=({p_d:g},{p_u:g})"
+    return name
+
+
+def episode_batches(episodes: Sequence, chunk: int = 64, features: Optional[List[np.ndarray]] = None):
+    """Batches of episodes (targets with their contexts); `features` overrides the target inputs."""
+    for i in range(0, len(episodes), chunk):
+        part = episodes[i : i + chunk]
+        xs = features[i : i + chunk] if features is not None else [e.target_features for e in part]
+        yield part, collate([(x, e.target.labels) for x, e in zip(xs, part)], [e.context for e in part])
+
+
+@torch.no_grad()
+def evaluate_episodes(model, episodes: Sequence, seed: int, features: Optional[List[np.ndarray]] = None,
+                      keep_means: bool = False) -> Dict:
+    """ELBO loss and MSE averaged over episodes (and the predicted means if asked)."""
+    g = torch.Generator().manual_seed(seed)
+    losses, mses, means = [], [], []
+    for part, batch in episode_batches(episodes, features=features):
+        terms = model(batch, p_tf=0.0, sample_posterior=True, generator=g)
+        losses.append(terms["loss_per_clip"])
+        pred = model.predict(batch)
+        m = batch.mask.to(pred["mean"].dtype)
+        mse = (((batch.y - pred["mean"]) ** 2).mean(-1) * m).sum(1) / m.sum(1).clamp_min(1)
+        mses.append(mse)
+        if keep_means:
+            for j in range(len(part)):
+                means.append(pred["mean"][j, : int(batch.mask[j].sum())].numpy())
+    if not losses:
+        return {"elbo_loss": None, "mse": None, "episodes": 0}
+    out = {"elbo_loss": float(torch.cat(losses).mean()), "mse": float(torch.cat(mses).mean()),
+           "episodes": int(sum(len(x) for x in mses))}
+    if keep_means:
+        out["means"] = means
+    return out
+
+
+def zero_twist_mse(episodes: Sequence) -> Optional[float]:
+    """MSE of always predicting a zero twist, averaged over episodes like the models' MSE."""
+    if not episodes:
+        return None
+    return float(np.mean([np.mean(np.asarray(e.target.labels, np.float64) ** 2) for e in episodes]))
+
+
+def _mean_std(values: List[Optional[float]]) -> Tuple[Optional[float], Optional[float]]:
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    if not vals:
+        return None, None
+    return float(np.mean(vals)), float(np.std(vals)) if len(vals) > 1 else 0.0
+
+
+def noise_levels() -> List[Tuple[float, float]]:
+    """(sigma_T, sigma_R) pairs from (0, 0) to (0.05, 0.1), equal increments."""
+    return [(MAX_SIGMA_T * i / (NOISE_LEVELS - 1), MAX_SIGMA_R * i / (NOISE_LEVELS - 1)) for i in range(NOISE_LEVELS)]
+
+
+def noisy_features(episodes: Sequence, sigma_t: float, sigma_r: float, seed: int) -> List[np.ndarray]:
+    from rtcohand_drake.data.sampling import add_feature_noise
+
+    rng = np.random.default_rng([seed, int(round(sigma_t * 1e6)), int(round(sigma_r * 1e6))])
+    return [add_feature_noise(e.target.features, sigma_t, sigma_r, rng) for e in episodes]
+
+
+def power_spectrum(sequences: Sequence[np.ndarray], rate_hz: float, n_fft: int = 64) -> Tuple[np.ndarray, np.ndarray]:
+    """Mean power spectrum (over sequences and motion dimensions) of (T, 6) sequences, mean removed."""
+    freqs = np.fft.rfftfreq(n_fft, 1.0 / rate_hz)
+    acc = np.zeros(len(freqs))
+    n = 0
+    for s in sequences:
+        if len(s) < 4:
+            continue
+        x = s - s.mean(0, keepdims=True)
+        spec = np.abs(np.fft.rfft(x, n=n_fft, axis=0)) ** 2  # zero-padded to n_fft
+        acc += spec.mean(1)
+        n += 1
+    return freqs, acc / max(n, 1)
+
+
+def high_freq_fraction(freqs: np.ndarray, power: np.ndarray, cutoff: float = HIGH_FREQ_HZ) -> float:
+    total = power[1:].sum()
+    return float(power[freqs > cutoff].sum() / total) if total > 0 else 0.0
+
+
+# --------------------------------------------------------------------------- report
+
+
+def _cell(entry: Dict) -> str:
+    if entry.get("mse") is None:
+        return "n/a"
+    el = entry.get("elbo_loss")
+    el_s = "n/a" if el is None else f"{el:.1f} ± {entry.get('elbo_loss_std') or 0:.1f}"
+    return f"{el_s} / {entry['mse']:.4g} ± {entry.get('mse_std') or 0:.2g}"
+
+
+def markdown_report(results: Dict) -> str:
+    lines = ["# Evaluation results", "",
+             f"Data: `{results['data']}`. Episode seed {results['seed']}. "
+             "Cells: ELBO loss (per target clip; NLL for the Dummy LSTM) / MSE (per step and dimension, "
+             "(m/s)² and (rad/s)²), mean ± std over training seeds.", ""]
+    shown = results.get("settings") or list(SETTINGS)
+    header = "| Model | seeds | " + " | ".join(shown) + " |"
+    lines += [header, "|" + "---|" * (len(shown) + 2)]
+    for name, entry in results["models"].items():
+        cells = [_cell(entry["settings"].get(s, {})) for s in shown]
+        lines.append(f"| {name} | {entry['seeds']} | " + " | ".join(cells) + " |")
+    zero = results.get("reference", {}).get("zero_twist_mse", {})
+    if zero:
+        lines.append("| zero twist (reference) | - | " + " | ".join(
+            "n/a" if zero.get(s) is None else f"n/a / {zero[s]:.4g}" for s in shown) + " |")
+    lines += ["", "Episodes per setting: " + ", ".join(
+        f"{s} {results['episodes'].get(s, 0)}" for s in shown), ""]
+    lines += ["## The paper's values (its real data; compare the ordering, not the numbers)", "",
+              "| Model | " + " | ".join(SETTINGS) + " |", "|" + "---|" * (len(SETTINGS) + 1)]
+    for name, row in PAPER_TABLE.items():
+        cells = []
+        for v in row:
+            if v is None:
+                cells.append("NA")
+            else:
+                cells.append(f"{'NA' if v[0] is None else v[0]} / {v[1]}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if results.get("noise_sweep"):
+        lines += ["", "## Noise sweep (D+U+, MSE mean over seeds)", "",
+                  "| Model | " + " | ".join(f"σT={t:.3f} σR={r:.2f}" for t, r in results["noise_sweep"]["levels"]) + " |",
+                  "|" + "---|" * (len(results["noise_sweep"]["levels"]) + 1)]
+        for name, d in results["noise_sweep"]["models"].items():
+            lines.append(f"| {name} | " + " | ".join(f"{v:.4g}" for v in d["mse"]) + " |")
+    if results.get("spectrum"):
+        lines += ["", f"## High-frequency content of the predicted means (power above {HIGH_FREQ_HZ:g} Hz / total)", "",
+                  "| Model | " + " | ".join(f"σT={lv[0]:.3f} σR={lv[1]:.3f}" for lv in results["spectrum"]["levels"]) + " |",
+                  "|" + "---|" * (len(results["spectrum"]["levels"]) + 1)]
+        gt = results["spectrum"]["ground_truth_high_freq_fraction"]
+        lines.append("| ground truth | " + " | ".join(f"{gt:.4f}" for _ in results["spectrum"]["levels"]) + " |")
+        for name, d in results["spectrum"]["models"].items():
+            lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in d["high_freq_fraction"]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- figures
+
+
+def plot_noise_sweep(sweep: Dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = [r for _, r in sweep["levels"]]
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.3))
+    for name, d in sweep["models"].items():
+        axes[0].errorbar(x, d["elbo_loss"], yerr=d["elbo_loss_std"], label=name, capsize=2, lw=1)
+        axes[1].errorbar(x, d["mse"], yerr=d["mse_std"], label=name, capsize=2, lw=1)
+    for ax, title in zip(axes, ("ELBO loss (NLL for Dummy LSTM)", "MSE")):
+        ax.set_xlabel("σR (rad/s); σT = σR / 2 (m/s)")
+        ax.set_title(title, fontsize=9)
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_spectrum(spec: Dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    levels = spec["levels"]
+    fig, axes = plt.subplots(1, len(levels), figsize=(3.3 * len(levels), 3.0), sharey=True)
+    for i, lv in enumerate(levels):
+        ax = axes[i]
+        ax.semilogy(spec["freqs"], spec["ground_truth_power"], "k--", lw=1, label="ground truth")
+        for name, d in spec["models"].items():
+            ax.semilogy(spec["freqs"], d["power"][i], lw=1, label=name)
+        ax.set_title(f"σT={lv[0]:.3f}, σR={lv[1]:.3f}", fontsize=9)
+        ax.set_xlabel("frequency (Hz)")
+    axes[0].set_ylabel("power of predicted mean")
+    axes[-1].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+DIM_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+
+
+def plot_attention(model, episode, path: pathlib.Path) -> None:
+    """Target time vs context time attention, with the context velocities alongside."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    batch = collate([(episode.target_features, episode.target.labels)], [episode.context])
+    pred = model.predict(batch, keep_attention=True)
+    att = pred["attention"][0]  # (T, heads, K)
+    mask = batch.mask_c[0].reshape(-1)
+    att = att.mean(1)[:, mask].numpy()  # (T, K valid)
+    y_c = batch.y_c[0].reshape(-1, 6)[mask].numpy()
+    dims = [int(d) for d in episode.target.active_dims] or list(range(6))
+    fig = plt.figure(figsize=(8, 5.5))
+    gs = fig.add_gridspec(2, 2, width_ratios=(1, 4), height_ratios=(4, 1.3), wspace=0.05, hspace=0.08)
+    ax_v = fig.add_subplot(gs[0, 0])
+    ax_a = fig.add_subplot(gs[0, 1], sharey=ax_v)
+    ax_t = fig.add_subplot(gs[1, 1], sharex=ax_a)
+    ax_a.imshow(att.T, origin="lower", aspect="auto", cmap="viridis", interpolation="nearest")
+    ax_a.set_title(f"attention: target {episode.target.name} (active {', '.join(DIM_NAMES[d] for d in dims)}), "
+                   f"context starts with {episode.chosen}", fontsize=8)
+    ax_a.tick_params(labelleft=False, labelbottom=False)
+    k = np.arange(len(y_c))
+    for d in dims:
+        ax_v.plot(y_c[:, d], k, lw=1, label=DIM_NAMES[d])
+    ax_v.set_ylabel("context step")
+    ax_v.set_xlabel("context velocity")
+    ax_v.invert_xaxis()
+    ax_v.legend(fontsize=6)
+    t = np.arange(att.shape[0])
+    for d in dims:
+        ax_t.plot(t, episode.target.labels[: len(t), d], "k--", lw=1)
+        ax_t.plot(t, pred["mean"][0, :, d].numpy(), lw=1, label=f"predicted {DIM_NAMES[d]}")
+    ax_t.set_xlabel("target step (dashed: ground truth)")
+    ax_t.legend(fontsize=6)
+    fig.savefig(path, dpi=90, bbox_inches="tight")
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- main
+
+
+def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Sequence[str]] = None, seed: int = 0,
+             settings: Sequence[str] = SETTINGS, sweep: bool = False, spectrum: bool = False,
+             attention: bool = False, threads: int = 0, max_episodes: int = 0) -> Dict:
+    from rtcohand_drake.data.sampling import evaluation_episodes
+    from rtcohand_drake.learning.train import load_clips
+
+    if threads > 0:
+        torch.set_num_threads(threads)
+    loaded = []
+    for i, ck in enumerate(checkpoints):
+        model, payload = load_checkpoint(ck)
+        name = names[i] if names else model_name(payload)
+        loaded.append((name, ck, model, payload))
+    rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
+    clips = load_clips(data, rate)
+    episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
+    if max_episodes > 0:
+        episodes = {s: e[:max_episodes] for s, e in episodes.items()}
+    per_model: Dict[str, Dict] = {}
+    for name, ck, model, payload in loaded:
+        entry = per_model.setdefault(name, {"checkpoints": [], "runs": []})
+        entry["checkpoints"].append(str(ck))
+        run = {s: evaluate_episodes(model, episodes[s], seed) for s in settings}
+        entry["runs"].append(run)
+        entry.setdefault("train", []).append({"step": payload.get("step"), **payload.get("meta", {})})
+        print(f"evaluated {name} ({ck}): " + ", ".join(
+            f"{s} mse={run[s]['mse']:.4g}" if run[s]["mse"] is not None else f"{s} n/a" for s in settings),
+            file=sys.stderr)
+    results: Dict = {"data": str(data), "seed": seed, "settings": list(settings),
+                     "episodes": {s: len(episodes[s]) for s in settings}, "models": {},
+                     # A policy that always commands zero twist: the floor any useful model must beat.
+                     "reference": {"zero_twist_mse": {s: zero_twist_mse(episodes[s]) for s in settings}}}
+    for name, entry in per_model.items():
+        agg = {}
+        for s in settings:
+            mse_m, mse_s = _mean_std([r[s]["mse"] for r in entry["runs"]])
+            el_m, el_s = _mean_std([r[s]["elbo_loss"] for r in entry["runs"]])
+            agg[s] = {"mse": mse_m, "mse_std": mse_s, "elbo_loss": el_m, "elbo_loss_std": el_s,
+                      "episodes": len(episodes[s]),
+                      "per_seed": {"mse": [r[s]["mse"] for r in entry["runs"]],
+                                   "elbo_loss": [r[s]["elbo_loss"] for r in entry["runs"]]}}
+        results["models"][name] = {"seeds": len(entry["runs"]), "checkpoints": entry["checkpoints"],
+                                   "train": entry["train"], "settings": agg}
+    out_dir = pathlib.Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    base = evaluation_episodes(clips, "D+U+", seed) if (sweep or spectrum) else []
+    if max_episodes > 0:
+        base = base[:max_episodes]
+    if sweep and base:
+        levels = noise_levels()
+        sw = {"levels": levels, "setting": "D+U+", "models": {}}
+        for name in per_model:
+            runs = [(m) for n, _, m, _ in loaded if n == name]
+            mse_lv, el_lv, mse_sd, el_sd = [], [], [], []
+            for li, (st, sr) in enumerate(levels):
+                feats = noisy_features(base, st, sr, seed)
+                rs = [evaluate_episodes(m, base, seed, features=feats) for m in runs]
+                a, b = _mean_std([r["mse"] for r in rs])
+                c, d = _mean_std([r["elbo_loss"] for r in rs])
+                mse_lv.append(a), mse_sd.append(b), el_lv.append(c), el_sd.append(d)
+            sw["models"][name] = {"mse": mse_lv, "mse_std": mse_sd, "elbo_loss": el_lv, "elbo_loss_std": el_sd}
+            print(f"noise sweep {name}: " + " ".join(f"{v:.4g}" for v in mse_lv), file=sys.stderr)
+        results["noise_sweep"] = sw
+        plot_noise_sweep(sw, out_dir / "noise_sweep.png")
+    if spectrum and base:
+        levels = [noise_levels()[i] for i in (0, NOISE_LEVELS // 2, NOISE_LEVELS - 1)]
+        gt_f, gt_p = power_spectrum([e.target.labels for e in base], rate)
+        sp = {"levels": levels, "freqs": gt_f.tolist(), "ground_truth_power": gt_p.tolist(),
+              "ground_truth_high_freq_fraction": high_freq_fraction(gt_f, gt_p), "cutoff_hz": HIGH_FREQ_HZ,
+              "models": {}}
+        for name in per_model:
+            model = next(m for n, _, m, _ in loaded if n == name)  # first seed
+            powers, fracs = [], []
+            for st, sr in levels:
+                feats = noisy_features(base, st, sr, seed)
+                r = evaluate_episodes(model, base, seed, features=feats, keep_means=True)
+                f, p = power_spectrum(r["means"], rate)
+                powers.append(p.tolist())
+                fracs.append(high_freq_fraction(f, p))
+            sp["models"][name] = {"power": powers, "high_freq_fraction": fracs}
+        results["spectrum"] = sp
+        plot_spectrum(sp, out_dir / "spectrum.png")
+    if attention:
+        cchp = next(((n, m) for n, _, m, p in loaded if p["kind"] == "cchp"), None)
+        eps = episodes.get("D+U+") or evaluation_episodes(clips, "D+U+", seed)
+        if cchp is not None and eps:
+            single = [e for e in eps if len(e.target.active_dims) == 1] or list(eps)
+            plot_attention(cchp[1], single[0], out_dir / "attention.png")
+    (out_dir / "results.json").write_text(json.dumps(results, indent=1))
+    (out_dir / "results.md").write_text(markdown_report(results))
+    return results
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.evaluate", description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", required=True, help="gesture dataset file (contracts §1)")
+    p.add_argument("--checkpoint", required=True, nargs="+", help="checkpoints; those with the same name are seeds")
+    p.add_argument("--names", nargs="+", default=None, help="model names, one per checkpoint")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--seed", type=int, default=0, help="seed of the evaluation episodes and noise")
+    p.add_argument("--settings", nargs="+", choices=ALL_SETTINGS, default=list(SETTINGS),
+                   help="the paper's six by default; 'Own' is the deployed setting (the user's own clips as context)")
+    p.add_argument("--noise-sweep", action="store_true", help="11 noise levels on D+U+ (noise_sweep.png)")
+    p.add_argument("--spectrum", action="store_true", help="spectrum of predictions at three noise levels")
+    p.add_argument("--attention", action="store_true", help="attention heatmap of the first CCHP checkpoint")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch default)")
+    p.add_argument("--max-episodes", type=int, default=0, help="use at most this many episodes per setting (0: all)")
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.names and len(args.names) != len(args.checkpoint):
+        raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
+    results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,
+                       args.noise_sweep, args.spectrum, args.attention, args.threads,
+                       args.max_episodes)
+    print(markdown_report(results))
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.evaluate"))
+
+
+if __name__ == "__main__":
+    entry_point()

@@ -1,0 +1,218 @@
+"""Export a trained CCHP checkpoint as a TorchScript policy (contracts §5).
+
+    python -m rtcohand_drake.export --checkpoint CKPT --out PATH.pt
+
+`torch.jit.load(PATH)` alone then gives a module with
+
+    encode_context(x_c [B, T, 36], y_c [B, T, 6], mask [B, T] bool)
+        -> (keys [K, D], values [K, 6], z_mu [Dz], z_sigma [Dz])
+    step(x_t [36], y_prev [6], h [H], c [H], keys [K, D], values [K, 6], z [Dz])
+        -> (mean [6], std [6], h [H], c [H], attention [K] (one head) or [heads, K])
+
+and the integer attributes feature_dim (36), hidden_size (H: the size of the
+recurrent state h and c, which includes the gesture cell's state when the
+attention keys come from one), latent_dim (Dz), attention_heads and key_size.
+Inputs and outputs are in physical units (features as the hand-feature module
+gives them, twists in m/s and rad/s); NaN features (hand lost) are read as
+zeros. K is the number of True entries of `mask`: each context piece (row of
+x_c) is encoded from a zero state, and the keys are already projected, so a
+step costs one or two LSTM cells and a few small MLPs plus one dot product or
+squared distance per context step. The caller keeps (h, c), feeds back the
+previous mean as y_prev, starts from zeros, and draws z ~ N(z_mu, z_sigma)
+itself (for example on every resume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import sys
+import warnings
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import nn
+
+from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.learning.nets.blocks import FEATURE_DIM, MOTION_DIM
+from rtcohand_drake.learning.nets.cchp import Cchp
+from rtcohand_drake.learning.checkpoint import load_checkpoint
+from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
+
+
+class CchpPolicy(nn.Module):
+    """The deployable CCHP: context encoding once, then one cheap step per frame."""
+
+    def __init__(self, model: Cchp):
+        super().__init__()
+        cfg = model.cfg
+        self.feature_dim = FEATURE_DIM
+        self.motion_dim = MOTION_DIM
+        self.hidden_size = cfg.state_size  # h and c carry the gesture cell's state too, when there is one
+        self.cell_size = cfg.hidden_size
+        self.key_offset = model.attention.key_offset
+        self.latent_dim = cfg.latent_dim
+        self.attention_heads = cfg.attention_heads
+        self.key_size = cfg.key_size
+        self.std_min = float(cfg.std_min)
+        self.read_skip = bool(cfg.read_skip)
+        self.latent_std_min = float(cfg.latent_std_min)
+        self.distance_kernel = cfg.attention_kernel == "distance"
+        self.key_scale = 1.0 if self.distance_kernel else 1.0 / math.sqrt(cfg.key_size)
+        self.register_buffer("feature_scale", model.normalizer.feature_scale.detach().clone())
+        self.register_buffer("label_scale", model.normalizer.label_scale.detach().clone())
+        self.fingers = model.cell.fingers.net
+        self.hand = model.cell.hand
+        self.lstm = model.cell.lstm
+        self.has_gesture_cell = model.cell.gesture is not None
+        # A 1-unit placeholder when there is no gesture cell, so the scripted module has one type; never run.
+        self.gesture = model.cell.gesture if model.cell.gesture is not None else nn.LSTMCell(1, 1)
+        self.aggregate = model.latent.aggregate
+        self.trunk = model.latent.trunk
+        self.mu_head = model.latent.mu_head
+        self.sigma_head = model.latent.sigma_head
+        self.kq = model.attention.kq
+        # Per-dimension output MLPs as (6, in, out) weights and (6, 1, out) biases for bmm.
+        self.out_weights: List[torch.Tensor] = [w.detach().clone() for w in model.output.net.weights]
+        self.out_biases: List[torch.Tensor] = [b.detach().clone().unsqueeze(1) for b in model.output.net.biases]
+
+    def _cell(self, finger_feat: torch.Tensor, y_prev_n: torch.Tensor, h: torch.Tensor, c: torch.Tensor
+              ) -> Tuple[torch.Tensor, torch.Tensor]:
+        n = self.cell_size
+        h_main = h[:, :n]
+        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h_main], 1)))
+        h2, c2 = self.lstm(torch.cat([hand_feat, y_prev_n], 1), (h_main, c[:, :n]))
+        if self.has_gesture_cell:
+            g, cg = self.gesture(finger_feat, (h[:, n:], c[:, n:]))
+            h2 = torch.cat([h2, g], 1)
+            c2 = torch.cat([c2, cg], 1)
+        return h2, c2
+
+    @torch.jit.export
+    def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
+                       ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        if x_c.dim() != 3 or x_c.size(2) != self.feature_dim:
+            raise RuntimeError("encode_context: x_c must be [B, T, 36]")
+        if y_c.dim() != 3 or y_c.size(2) != self.motion_dim or y_c.size(0) != x_c.size(0) or y_c.size(1) != x_c.size(1):
+            raise RuntimeError("encode_context: y_c must be [B, T, 6] like x_c")
+        if mask.dim() != 2 or mask.size(0) != x_c.size(0) or mask.size(1) != x_c.size(1):
+            raise RuntimeError("encode_context: mask must be [B, T] like x_c")
+        mask = mask.to(torch.bool)
+        if not bool(mask.any()):
+            raise RuntimeError("encode_context: the mask selects no context step")
+        b = x_c.size(0)
+        t_len = x_c.size(1)
+        x = torch.nan_to_num(x_c.to(torch.float32), 0.0, 0.0, 0.0) / self.feature_scale
+        y = y_c.to(torch.float32) / self.label_scale
+        fingers = self.fingers(x.reshape(b, t_len, 6, 6)).reshape(b, t_len, -1)
+        h = torch.zeros(b, self.hidden_size)
+        c = torch.zeros(b, self.hidden_size)
+        y_prev = torch.zeros(b, self.motion_dim)
+        hs: List[torch.Tensor] = []
+        for t in range(t_len):
+            h, c = self._cell(fingers[:, t], y_prev, h, c)
+            hs.append(h)
+            y_prev = y[:, t]
+        h_all = torch.stack(hs, 1)[mask]  # (K, H)
+        y_valid = y[mask]  # (K, 6), normalised
+        keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
+        s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
+        g = self.trunk(s)
+        z_mu = self.mu_head(g)[0]
+        z_sigma = self.latent_std_min + (1.0 - self.latent_std_min) * torch.sigmoid(self.sigma_head(g)[0])
+        values = y_c.to(torch.float32)[mask]
+        return keys, values, z_mu, z_sigma
+
+    @torch.jit.export
+    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
+        finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
+        h2, c2 = self._cell(finger_feat, (y_prev / self.label_scale).view(1, -1), h.view(1, -1), c.view(1, -1))
+        q = self.kq(h2[:, self.key_offset:])  # (1, heads * key_size)
+        if self.distance_kernel:
+            k = keys.size(0)
+            diff = keys.view(k, self.attention_heads, self.key_size) - q.view(1, self.attention_heads, self.key_size)
+            scores = -(diff * diff).sum(2).t()  # (heads, K)
+        elif self.attention_heads == 1:
+            scores = torch.mm(q, keys.t())  # (1, K)
+        else:
+            k = keys.size(0)
+            scores = (keys.view(k, self.attention_heads, self.key_size)
+                      * q.view(1, self.attention_heads, self.key_size)).sum(2).t()  # (heads, K)
+        weights = torch.softmax(scores, 1)
+        r = torch.mm(weights, values) / self.label_scale  # (heads, 6)
+        hz = torch.cat([h2, z.view(1, -1)], 1)
+        inp = torch.cat([r.expand(6, 6), hz.expand(6, hz.size(1))], 1).unsqueeze(1)  # (6, 1, in)
+        n_layers = len(self.out_weights)
+        i = 0
+        for w, bias in zip(self.out_weights, self.out_biases):
+            inp = torch.baddbmm(bias, inp, w)
+            if i < n_layers - 1:
+                inp = torch.relu(inp)
+            i += 1
+        out = inp.view(6, 2)
+        scale = self.label_scale
+        mean_n = out[:, 0]
+        if self.read_skip:  # dimension d adds its read of dimension d
+            mean_n = mean_n + torch.diagonal(r.expand(6, 6))
+        mean = mean_n * scale
+        std = (self.std_min + (1.0 - self.std_min) * nn.functional.softplus(out[:, 1])) * scale
+        attention = weights[0] if self.attention_heads == 1 else weights
+        return mean, std, h2.view(-1), c2.view(-1), attention
+
+
+def script_policy(model: Cchp) -> torch.jit.ScriptModule:
+    if not isinstance(model, Cchp):
+        raise InputError(f"only CCHP checkpoints can be exported, got a {getattr(model, 'kind', type(model).__name__)} model")
+    model = model.eval()
+    policy = CchpPolicy(model).eval()
+    for param in policy.parameters():
+        param.requires_grad_(False)  # no autograd bookkeeping in the deployed step
+    return torch.jit.script(policy)
+
+
+def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path:
+    """Script the checkpoint's model and write it to `out` (with a JSON model card as an extra file)."""
+    model, payload = load_checkpoint(checkpoint)
+    if payload["kind"] != "cchp":
+        raise InputError(f"{checkpoint}: only CCHP checkpoints can be exported, this one holds {payload['kind']!r}")
+    scripted = script_policy(model)
+    card = {
+        "kind": payload["kind"],
+        "model_config": payload["model_config"],
+        "train_config": payload.get("train_config", {}),
+        "step": payload.get("step"),
+        "meta": payload.get("meta", {}),
+    }
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
+    os.replace(tmp, out)
+    return out
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.export", description="Export a CCHP checkpoint as TorchScript.")
+    p.add_argument("--checkpoint", required=True, help="checkpoint written by rtcohand_drake.learning.train")
+    p.add_argument("--out", required=True, help="TorchScript file to write (.pt)")
+    args = p.parse_args(argv)
+    # TorchScript is the deployment format of contracts §5; its deprecation notice is noise here.
+    warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
+    out = export_checkpoint(args.checkpoint, args.out)
+    load_policy(out)
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.export"))
+
+
+if __name__ == "__main__":
+    entry_point()

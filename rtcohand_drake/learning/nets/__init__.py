@@ -1,0 +1,1 @@
+"""The networks: CCHP (`cchp`), the RANP and Dummy LSTM baselines, and their shared blocks."""

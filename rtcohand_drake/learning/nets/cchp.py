@@ -1,0 +1,487 @@
+"""CCHP: the conditional collaborative handling process (paper, "Neural Network
+Architecture of CCHP"), one small module per block of the paper's diagram, with
+the ELBO written next to it.
+
+Shapes: B batch items, T target steps, P context pieces per item, Tc steps per
+piece, H hidden size, Dz latent size. Features x are (.., 36) hand-part
+velocities, labels y are (.., 6) workpiece twists (Tx Ty Tz Rx Ry Rz).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Dict, List, Optional, Tuple
+
+import torch
+from torch import nn
+
+from rtcohand_drake.learning.batching import Batch
+from rtcohand_drake.learning.nets.blocks import (
+    FEATURE_DIM,
+    MOTION_DIM,
+    NUM_PARTS,
+    PART_DIM,
+    Normalizer,
+    PerDimensionMLP,
+    bounded_std,
+    gaussian_kl,
+    gaussian_log_prob,
+    mlp,
+)
+
+
+@dataclass
+class CchpConfig:
+    """Network sizes. Defaults: paper appendix, table "MLP configurations"."""
+
+    hidden_size: int = 128  # H, LSTM cell state
+    finger_sizes: List[int] = field(default_factory=lambda: [PART_DIM, 32, 32])  # f_finger
+    hand_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_hand hidden layers
+    hand_feature_size: int = 32  # f_hand output
+    aggregate_sizes: List[int] = field(default_factory=lambda: [128, 128, 128, 128])  # f_a after its input
+    latent_trunk_sizes: List[int] = field(default_factory=lambda: [128, 128, 128, 128, 128])  # f_phi
+    latent_dim: int = 32  # D_z
+    key_size: int = 32  # f_kq output
+    attention_heads: int = 1  # 1, or 6 (one head per motion dimension)
+    # What the attention's keys and query are computed from: "state", the
+    # encoder cell's hidden state h (paper), or "gesture", the state of a
+    # second LSTM cell that sees the hand features only. The cell's state h
+    # is fed the labels (true ones in the context, the model's own in the
+    # target), so "state" keys can match on the previous label rather than
+    # on the gesture; "gesture" keys compare the two hand motions alone.
+    key_source: str = "state"
+    gesture_hidden_size: int = 64  # G, the gesture cell's state ("gesture" keys only)
+    # Attention scores: "dot", q.k / sqrt(key_size) (paper), or "distance",
+    # -|q - k|^2: a Gaussian kernel on the projected states, which learns to
+    # pick out the context steps nearest to the query much sooner.
+    attention_kernel: str = "dot"
+    # True: the mean is the context read plus f_y's output (f_y learns a
+    # correction to the read); False: f_y's output alone (paper).
+    read_skip: bool = False
+    output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
+    std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
+    latent_std_min: float = 0.1  # lower bound of sigma_z
+
+    def to_dict(self) -> Dict:
+        return asdict(self)
+
+    @property
+    def gesture_size(self) -> int:
+        """Size of the gesture cell's state (0 without one)."""
+        return self.gesture_hidden_size if self.key_source == "gesture" else 0
+
+    @property
+    def state_size(self) -> int:
+        """Size of the recurrent state the decoder carries: h, then the gesture cell's state."""
+        return self.hidden_size + self.gesture_size
+
+
+class FingerFeatures(nn.Module):
+    """f_finger applied to each of the 6 hand parts: (.., 36) -> (.., 6 * H')."""
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.net = mlp(cfg.finger_sizes)
+        self.out_size = NUM_PARTS * cfg.finger_sizes[-1]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        parts = x.reshape(x.shape[:-1] + (NUM_PARTS, PART_DIM))
+        return self.net(parts).flatten(-2)
+
+
+class EncoderCell(nn.Module):
+    """f_enc: (finger features of x(t), y(t-1), h(t-1), c(t-1)) -> (h(t), c(t)).
+
+    f_hand sees the part features and h(t-1); the LSTM cell sees the hand
+    feature and y(t-1). The finger features do not depend on the recurrence,
+    so callers compute them for all steps at once with `fingers`.
+
+    With "gesture" keys a second LSTM cell runs on the finger features alone;
+    its state is appended to h and c, so the state is (.., H + G).
+    """
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.hidden_size = cfg.hidden_size
+        self.fingers = FingerFeatures(cfg)
+        self.hand = mlp([self.fingers.out_size + cfg.hidden_size] + list(cfg.hand_hidden) + [cfg.hand_feature_size])
+        self.lstm = nn.LSTMCell(cfg.hand_feature_size + MOTION_DIM, cfg.hidden_size)
+        self.gesture = nn.LSTMCell(self.fingers.out_size, cfg.gesture_size) if cfg.gesture_size else None
+
+    def forward(
+        self, finger_feat: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor
+    ) -> Tuple[torch.Tensor, torch.Tensor]:
+        n = self.hidden_size
+        h_main = h[..., :n]
+        hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h_main], -1)))
+        h_new, c_new = self.lstm(torch.cat([hand_feat, y_prev], -1), (h_main, c[..., :n]))
+        if self.gesture is None:
+            return h_new, c_new
+        g, cg = self.gesture(finger_feat, (h[..., n:], c[..., n:]))
+        return torch.cat([h_new, g], -1), torch.cat([c_new, cg], -1)
+
+
+class LatentEncoder(nn.Module):
+    """f_a, mean over time, f_phi and two Gaussian heads: q(z | x, y).
+
+    The same network gives q(z|C) (context steps only) and q(z|C,T)
+    (context and target steps).
+    """
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.aggregate = mlp([cfg.state_size + MOTION_DIM] + list(cfg.aggregate_sizes))
+        self.trunk = nn.Sequential(mlp([cfg.aggregate_sizes[-1]] + list(cfg.latent_trunk_sizes)), nn.ReLU())
+        self.mu_head = nn.Linear(cfg.latent_trunk_sizes[-1], cfg.latent_dim)
+        self.sigma_head = nn.Linear(cfg.latent_trunk_sizes[-1], cfg.latent_dim)
+        self.latent_std_min = cfg.latent_std_min
+
+    def step_features(self, h: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return self.aggregate(torch.cat([h, y], -1))
+
+    def from_summary(self, s: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        g = self.trunk(s)
+        sigma = self.latent_std_min + (1.0 - self.latent_std_min) * torch.sigmoid(self.sigma_head(g))
+        return self.mu_head(g), sigma
+
+
+class ContextAttention(nn.Module):
+    """Dot-product attention of a target hidden state over context hidden states.
+
+    f_kq maps keys (context states) and the query (target state) to the same
+    space; the values are the context velocities. Keys are projected once per
+    context (`project_keys`), for "dot" scores scaled by 1/sqrt(key_size). f_kq reads the
+    state from `key_offset` on: all of h ("state" keys) or the gesture cell's
+    part ("gesture" keys).
+    """
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.heads = cfg.attention_heads
+        self.key_size = cfg.key_size
+        self.key_offset = cfg.hidden_size if cfg.gesture_size else 0
+        self.distance = cfg.attention_kernel == "distance"
+        self.kq = nn.Linear(cfg.state_size - self.key_offset, cfg.attention_heads * cfg.key_size)
+
+    def project_keys(self, h_c: torch.Tensor) -> torch.Tensor:
+        """(..., K, state) -> (..., heads, K, key_size)."""
+        k = self.kq(h_c[..., self.key_offset:])
+        if not self.distance:
+            k = k / math.sqrt(self.key_size)
+        k = k.reshape(h_c.shape[:-1] + (self.heads, self.key_size))
+        return k.movedim(-2, -3)
+
+    def forward(
+        self, h_t: torch.Tensor, keys: torch.Tensor, values: torch.Tensor, key_mask: torch.Tensor
+    ) -> Tuple[torch.Tensor, torch.Tensor]:
+        """h_t (B, H), keys (B, heads, K, dk), values (B, K, 6), key_mask (B, K).
+
+        Returns r (B, heads, 6) and the weights (B, heads, K).
+        """
+        q = self.kq(h_t[..., self.key_offset:]).reshape(h_t.shape[0], self.heads, self.key_size, 1)
+        if self.distance:
+            scores = -((keys - q.transpose(-1, -2)) ** 2).sum(-1)  # (B, heads, K)
+        else:
+            scores = torch.matmul(keys, q).squeeze(-1)  # (B, heads, K)
+        scores = scores.masked_fill(~key_mask.unsqueeze(1), float("-inf"))
+        weights = torch.softmax(scores, -1)
+        return torch.matmul(weights, values), weights
+
+
+class OutputHeads(nn.Module):
+    """f_y, one MLP per motion dimension: (r, h, z) -> mean and bounded std."""
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.heads = cfg.attention_heads
+        in_size = MOTION_DIM + cfg.state_size + cfg.latent_dim
+        self.net = PerDimensionMLP(MOTION_DIM, [in_size] + list(cfg.output_hidden) + [2])
+        self.std_min = cfg.std_min
+        self.read_skip = cfg.read_skip
+
+    def forward(self, r: torch.Tensor, h: torch.Tensor, z: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """r (B, heads, 6), h (B, H), z (B, Dz) -> mean, std (B, 6) in label-scale units."""
+        b = h.shape[0]
+        r = r.expand(b, MOTION_DIM, MOTION_DIM)  # one context read per output dimension
+        hz = torch.cat([h, z], -1).unsqueeze(1).expand(b, MOTION_DIM, h.shape[-1] + z.shape[-1])
+        out = self.net(torch.cat([r, hz], -1))  # (B, 6, 2)
+        mean = out[..., 0]
+        if self.read_skip:  # output dimension d adds its own read of dimension d
+            mean = mean + torch.diagonal(r, dim1=1, dim2=2)
+        return mean, bounded_std(out[..., 1], self.std_min)
+
+
+@dataclass
+class ContextEncoding:
+    """What the decoder needs from a context: per-item keys, values, mask, and q(z|C)."""
+
+    keys: torch.Tensor  # (B, heads, K, dk)
+    values: torch.Tensor  # (B, K, 6), label-scale units
+    mask: torch.Tensor  # (B, K) bool
+    z_mu: torch.Tensor  # (B, Dz)
+    z_sigma: torch.Tensor  # (B, Dz)
+
+
+class Cchp(nn.Module):
+    """The whole CCHP: encoder (recurrent encoder cells + latent encoder) and
+    decoder (recurrent encoder cell + context attention + output heads)."""
+
+    kind = "cchp"
+
+    def __init__(self, cfg: Optional[CchpConfig] = None):
+        super().__init__()
+        self.cfg = cfg or CchpConfig()
+        if self.cfg.attention_heads not in (1, MOTION_DIM):
+            raise ValueError(f"attention_heads must be 1 or {MOTION_DIM}, got {self.cfg.attention_heads}")
+        if self.cfg.attention_kernel not in ("dot", "distance"):
+            raise ValueError(f"attention_kernel must be 'dot' or 'distance', got {self.cfg.attention_kernel!r}")
+        if self.cfg.key_source not in ("state", "gesture"):
+            raise ValueError(f"key_source must be 'state' or 'gesture', got {self.cfg.key_source!r}")
+        self.normalizer = Normalizer()
+        self.cell = EncoderCell(self.cfg)
+        self.latent = LatentEncoder(self.cfg)
+        self.attention = ContextAttention(self.cfg)
+        self.output = OutputHeads(self.cfg)
+
+    # -- encoder ---------------------------------------------------------
+    def encode_sequences(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Hidden states of sequences with their own labels fed back.
+
+        x (N, T, 36), y (N, T, 6), both normalised; returns h (N, T, H).
+        Steps past a sequence's end are computed but meaningless (masked later).
+        """
+        n, t_len, _ = x.shape
+        fingers = self.cell.fingers(x)
+        y_prev = torch.cat([y.new_zeros(n, 1, MOTION_DIM), y[:, :-1]], 1)
+        h = x.new_zeros(n, self.cfg.state_size)
+        c = x.new_zeros(n, self.cfg.state_size)
+        hs = []
+        for t in range(t_len):
+            h, c = self.cell(fingers[:, t], y_prev[:, t], h, c)
+            hs.append(h)
+        return torch.stack(hs, 1)
+
+    def encode_context(
+        self, batch: Batch, h_c: Optional[torch.Tensor] = None
+    ) -> Tuple[ContextEncoding, torch.Tensor]:
+        """Encode every context piece of the batch (h_c (B*P, Tc, H) if already
+        computed). Returns the encoding and the summed f_a features with their
+        step counts (to extend to q(z|C,T))."""
+        b, p, tc, _ = batch.x_c.shape
+        y_c = self.normalizer_y(batch.y_c).reshape(b * p, tc, MOTION_DIM)
+        if h_c is None:
+            x_c = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
+            h_c = self.encode_sequences(x_c, y_c)
+        mask = batch.mask_c.reshape(b, p * tc)
+        keys = self.attention.project_keys(h_c.reshape(b, p * tc, -1))
+        values = y_c.reshape(b, p * tc, MOTION_DIM)
+        feats = self.latent.step_features(h_c, y_c).reshape(b, p * tc, -1)
+        m = mask.unsqueeze(-1).to(feats.dtype)
+        sums = (feats * m).sum(1)
+        counts = m.sum(1)
+        z_mu, z_sigma = self.latent.from_summary(sums / counts.clamp_min(1.0))
+        return ContextEncoding(keys, values, mask, z_mu, z_sigma), torch.cat([sums, counts], -1)
+
+    def encode_context_and_target(self, batch: Batch) -> Tuple[torch.Tensor, torch.Tensor]:
+        """Hidden states of the context pieces (B*P, Tc, H) and of the targets
+        (B, T, H) with their own labels fed back, in one recurrent pass."""
+        b, p, tc, _ = batch.x_c.shape
+        t_len = batch.x.shape[1]
+        n_max = max(tc, t_len)
+
+        def pad(a: torch.Tensor) -> torch.Tensor:
+            return nn.functional.pad(a, (0, 0, 0, n_max - a.shape[1]))
+
+        x = torch.cat([pad(batch.x_c.reshape(b * p, tc, FEATURE_DIM)), pad(batch.x)], 0)
+        y = torch.cat([pad(batch.y_c.reshape(b * p, tc, MOTION_DIM)), pad(batch.y)], 0)
+        h = self.encode_sequences(self.normalizer_x(x), self.normalizer_y(y))
+        return h[: b * p, :tc], h[b * p :, :t_len]
+
+    def posterior(
+        self, batch: Batch, context_stats: torch.Tensor, h_t: Optional[torch.Tensor] = None
+    ) -> Tuple[torch.Tensor, torch.Tensor]:
+        """q(z | C, T): the latent encoder over the context and target steps."""
+        y = self.normalizer_y(batch.y)
+        if h_t is None:
+            h_t = self.encode_sequences(self.normalizer_x(batch.x), y)
+        feats = self.latent.step_features(h_t, y)
+        m = batch.mask.unsqueeze(-1).to(feats.dtype)
+        sums = context_stats[:, :-1] + (feats * m).sum(1)
+        counts = context_stats[:, -1:] + m.sum(1)
+        return self.latent.from_summary(sums / counts.clamp_min(1.0))
+
+    # -- decoder ---------------------------------------------------------
+    def decode(
+        self,
+        x: torch.Tensor,
+        ctx: ContextEncoding,
+        z: torch.Tensor,
+        y_teacher: Optional[torch.Tensor] = None,
+        p_tf: float = 0.0,
+        generator: Optional[torch.Generator] = None,
+        keep_attention: bool = False,
+        readouts: Optional[List[torch.Tensor]] = None,
+    ) -> Tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+        """Run the decoder cell over the target.
+
+        x (B, T, 36) normalised; y_teacher (B, T, 6) normalised ground truth.
+        The previous output fed back is the ground truth with probability p_tf
+        (per item and step), otherwise the model's own mean (detached).
+        Returns mean, std (B, T, 6) in label-scale units and optionally the
+        attention weights (B, T, heads, K). If `readouts` is a list, each
+        step's context read r(t) (B, heads, 6), label-scale units, is appended.
+        """
+        b, t_len, _ = x.shape
+        fingers = self.cell.fingers(x)
+        h = x.new_zeros(b, self.cfg.state_size)
+        c = x.new_zeros(b, self.cfg.state_size)
+        y_prev = x.new_zeros(b, MOTION_DIM)
+        means, stds, attns = [], [], []
+        for t in range(t_len):
+            h, c = self.cell(fingers[:, t], y_prev, h, c)
+            r, weights = self.attention(h, ctx.keys, ctx.values, ctx.mask)
+            if readouts is not None:
+                readouts.append(r)
+            mean, std = self.output(r, h, z)
+            means.append(mean)
+            stds.append(std)
+            if keep_attention:
+                attns.append(weights)
+            if y_teacher is None or p_tf <= 0.0:
+                y_prev = mean.detach()
+            elif p_tf >= 1.0:
+                y_prev = y_teacher[:, t]
+            else:
+                use_truth = torch.rand(b, 1, generator=generator, device=x.device) < p_tf
+                y_prev = torch.where(use_truth, y_teacher[:, t], mean.detach())
+        attention = torch.stack(attns, 1) if keep_attention else None
+        return torch.stack(means, 1), torch.stack(stds, 1), attention
+
+    def normalizer_x(self, x: torch.Tensor) -> torch.Tensor:
+        return x / self.normalizer.feature_scale
+
+    def normalizer_y(self, y: torch.Tensor) -> torch.Tensor:
+        return y / self.normalizer.label_scale
+
+    def forward(
+        self,
+        batch: Batch,
+        p_tf: float = 0.0,
+        sample_posterior: bool = True,
+        generator: Optional[torch.Generator] = None,
+        x_noise_std: float = 0.0,
+        nll_beta: float = 0.0,
+        readout_weight: float = 0.0,
+    ) -> Dict[str, torch.Tensor]:
+        """The ELBO terms for a batch (see `cchp_elbo`)."""
+        return cchp_elbo(self, batch, p_tf, sample_posterior, generator, x_noise_std, nll_beta, readout_weight)
+
+    @torch.no_grad()
+    def predict(
+        self, batch: Batch, z_from: str = "prior_mean", generator: Optional[torch.Generator] = None,
+        keep_attention: bool = False,
+    ) -> Dict[str, torch.Tensor]:
+        """Free-running prediction (the model's own mean fed back), physical units."""
+        ctx, _ = self.encode_context(batch)
+        if z_from == "prior_mean":
+            z = ctx.z_mu
+        elif z_from == "prior_sample":
+            z = ctx.z_mu + ctx.z_sigma * torch.randn(ctx.z_mu.shape, generator=generator)
+        else:
+            raise ValueError(f"unknown z_from {z_from!r}")
+        mean, std, attn = self.decode(self.normalizer_x(batch.x), ctx, z, keep_attention=keep_attention)
+        scale = self.normalizer.label_scale
+        out = {"mean": mean * scale, "std": std * scale}
+        if attn is not None:
+            out["attention"] = attn
+        return out
+
+
+def cchp_elbo(
+    model: Cchp,
+    batch: Batch,
+    p_tf: float,
+    sample_posterior: bool = True,
+    generator: Optional[torch.Generator] = None,
+    x_noise_std: float = 0.0,
+    nll_beta: float = 0.0,
+    readout_weight: float = 0.0,
+) -> Dict[str, torch.Tensor]:
+    """Negative ELBO per target clip, averaged over the batch.
+
+    ELBO = sum_t E_{z ~ q(z|C,T)} log N(y_T(t); mu(t), sigma(t)) - KL(q(z|C,T) || q(z|C))
+    (paper, eq. "elbo_2"), one z sample per clip. The log-likelihood is taken
+    in physical units, so values compare across models with the same data.
+    `x_noise_std` adds Gaussian noise (in physical units) to the target input.
+    `readout_weight` > 0 adds to the training loss that many times
+    0.5 * sum_t |r(t) - y(t)|^2 (label-scale units, per clip): the context read
+    itself should predict the twist. This trains the attention to find the
+    context steps with the same gesture directly, instead of only through the
+    output heads, which early in training learn to ignore an uninformative read.
+    Returns loss (the training objective), elbo_loss (= -ELBO), nll, kl, mse of
+    the mean (per step and dimension) and, with a readout weight, readout_mse.
+    """
+    h_c, h_t = model.encode_context_and_target(batch)
+    ctx, stats = model.encode_context(batch, h_c)
+    post_mu, post_sigma = model.posterior(batch, stats, h_t)
+    if sample_posterior:
+        eps = torch.randn(post_mu.shape, generator=generator, device=post_mu.device)
+        z = post_mu + post_sigma * eps
+    else:
+        z = post_mu
+    x = batch.x
+    if x_noise_std > 0.0:
+        x = x + x_noise_std * torch.randn(x.shape, generator=generator, device=x.device)
+    y_n = model.normalizer_y(batch.y)
+    reads: Optional[List[torch.Tensor]] = [] if readout_weight > 0.0 else None
+    mean_n, std_n, _ = model.decode(model.normalizer_x(x), ctx, z, y_teacher=y_n, p_tf=p_tf, generator=generator,
+                                    readouts=reads)
+    scale = model.normalizer.label_scale
+    kl = gaussian_kl(post_mu, post_sigma, ctx.z_mu, ctx.z_sigma)
+    terms = likelihood_terms(batch, mean_n * scale, std_n * scale, kl, scale, nll_beta)
+    if reads is not None:
+        r = torch.stack(reads, 1)  # (B, T, heads, 6)
+        # One head: its read of every dimension; one head per dimension: head d's read of dimension d.
+        r = r[:, :, 0] if r.shape[2] == 1 else torch.diagonal(r, dim1=2, dim2=3)
+        m = batch.mask.to(r.dtype)
+        sq = ((r - y_n) ** 2).sum(-1) * m  # (B, T)
+        terms["loss"] = terms["loss"] + readout_weight * 0.5 * sq.sum(1).mean()
+        terms["readout_mse"] = sq.sum() / (m.sum().clamp_min(1.0) * MOTION_DIM)
+    return terms
+
+
+def likelihood_terms(
+    batch: Batch, mean: torch.Tensor, std: torch.Tensor, kl: Optional[torch.Tensor],
+    label_scale: Optional[torch.Tensor] = None, nll_beta: float = 0.0,
+) -> Dict[str, torch.Tensor]:
+    """Per-batch loss terms from predicted means/stds (B, T, 6) in physical units.
+
+    "loss" is the training objective: -ELBO, or with nll_beta > 0 the beta-NLL
+    of Seitzer et al. (ICLR 2022), where each step's and dimension's NLL is
+    weighted by the (gradient-free) predicted variance in label-scale units to
+    the power beta. Plain NLL lets a large predicted std starve the mean of
+    gradient, which slows the fit of the mean a lot. "elbo_loss" (and
+    "loss_per_clip") are always the plain -ELBO.
+    """
+    m = batch.mask.to(mean.dtype)
+    nll_e = -gaussian_log_prob(batch.y, mean, std)  # (B, T, 6)
+    nll = (nll_e.sum(-1) * m).sum(1)  # (B,)
+    sq = (((batch.y - mean) ** 2).mean(-1) * m).sum(1)  # (B,)
+    steps = m.sum(1).clamp_min(1.0)
+    kl_b = kl if kl is not None else torch.zeros_like(nll)
+    if nll_beta > 0.0:
+        std_n = std.detach() if label_scale is None else std.detach() / label_scale
+        weighted = ((nll_e * std_n.pow(2.0 * nll_beta)).sum(-1) * m).sum(1)
+        objective = (weighted + kl_b).mean()
+    else:
+        objective = (nll + kl_b).mean()
+    return {
+        "loss": objective,
+        "elbo_loss": (nll + kl_b).mean(),
+        "nll": nll.mean(),
+        "kl": kl_b.mean(),
+        "mse": (sq / steps).mean(),
+        "loss_per_clip": (nll + kl_b).detach(),
+        "mse_per_clip": (sq / steps).detach(),
+    }

@@ -1,0 +1,72 @@
+"""`ReplayGestureSource`: plays dataset clips (docs/interfaces.md, the gesture dataset file)
+back to back, with exactly the features the offline pipeline computes for them.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS
+from rtcohand_drake.systems.gestures.base import NAN_HAND
+
+
+class ReplayGestureSource(LeafSystem):
+    """Replays clips at the policy rate (features computed offline, exactly as in training).
+
+    `clips` are `PolicyClip`s; `skeletons` (optional) are per-clip keypoint
+    arrays resampled at the policy rate, for drawing. After the last clip the
+    source reports an invalid gesture (the supervisor's watchdog then stops the arm).
+    """
+
+    def __init__(self, clips: Sequence, rate_hz: float = 10.0, skeletons: Sequence[np.ndarray] | None = None):
+        super().__init__()
+        if not clips:
+            raise ValueError("ReplayGestureSource needs at least one clip")
+        self._rate = rate_hz
+        self._features = np.concatenate([c.features for c in clips]).astype(float)
+        self._valid = np.concatenate([c.valid for c in clips]).astype(float)
+        self._labels = (np.concatenate([c.labels for c in clips]) if all(c.labels is not None for c in clips)
+                        else None)
+        self.clip_starts = np.cumsum([0] + [len(c) for c in clips])[:-1] / rate_hz
+        self.clip_names = [c.name for c in clips]
+        self._skeletons = (np.concatenate([np.asarray(s, float).reshape(len(s), 63) for s in skeletons])
+                           if skeletons is not None else None)
+        self.DeclareVectorOutputPort(GESTURE_FEATURES, 36, self._calc_features)
+        self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._calc_status)
+        self.DeclareVectorOutputPort(KEYPOINTS, 63, self._calc_keypoints)
+
+    @property
+    def end_time(self) -> float:
+        return len(self._features) / self._rate
+
+    @property
+    def features(self) -> np.ndarray:
+        return self._features
+
+    @property
+    def labels(self) -> np.ndarray | None:
+        return self._labels
+
+    def _index(self, context) -> int:
+        return int(np.floor(context.get_time() * self._rate + 1e-6))
+
+    def _calc_features(self, context, output: BasicVector):
+        k = self._index(context)
+        output.SetFromVector(self._features[k] if k < len(self._features) else np.zeros(36))
+
+    def _calc_status(self, context, output: BasicVector):
+        k = self._index(context)
+        if k < len(self._features):
+            output.SetFromVector([self._valid[k], k / self._rate])
+        else:  # the stream has ended: no fresh gesture
+            output.SetFromVector([0.0, (len(self._features) - 1) / self._rate])
+
+    def _calc_keypoints(self, context, output: BasicVector):
+        k = self._index(context)
+        if self._skeletons is not None and k < len(self._skeletons):
+            output.SetFromVector(self._skeletons[k])
+        else:
+            output.SetFromVector(NAN_HAND.reshape(-1))

@@ -1,0 +1,171 @@
+"""`CchpPolicy`: the exported CCHP TorchScript policy as a Drake LeafSystem.
+
+The system loads the TorchScript file (contracts §5) once and keeps the
+module as an attribute; the recurrent state is numpy discrete state, so the
+context clones cleanly. The user's context clips are encoded once, at
+construction (keys, values, and the latent prior q(z|C) = N(z_mu, z_sigma)).
+
+Every policy period (1 / rate_hz) it runs one `step` on the newest gesture
+features, feeding back the module's own previous mean. When `resume_count`
+changes (the operator resumed after a pause) the recurrent state is cleared and
+a new z is drawn from q(z|C); the draw is deterministic given (seed,
+resume_count), so a run is reproducible.
+
+What it outputs as the twist is, with w = `correction_weight`,
+
+    policy_mean = r(t) + w * (mean(t) - r(t)),   r(t) = attention(t) . values
+
+r(t) is the context read: the user's own labelled twists, weighted by how alike
+the gestures are. For a model with `read_skip` (the shipped one), mean - r is
+the correction of the decoder f_y, which was learned on other people and pulls
+a gesture toward what it means to them; w = 1 is the module's mean itself (the
+paper's CCHP), w = 0 the read alone (`policy.correction_weight` in the
+scenario; the README has what each does in the closed-loop task). The module
+is always fed its own mean, as in training, whatever w is.
+
+Input ports
+  gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)
+  resume_count     (1)  optional; z is resampled when it changes
+Output ports
+  policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
+  policy_std       (6)
+  attention        (K)  attention weights over the K context steps (mean over heads)
+"""
+
+# No `from __future__ import annotations`: Drake's yaml_load_typed reads the real field types.
+import dataclasses as dc
+import os
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.interfaces import ATTENTION, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD, RESUME_COUNT
+
+
+@dc.dataclass
+class Policy:
+    """The CCHP policy system."""
+
+    # Policy update rate (Hz); the paper's deployment runs at 10 Hz.
+    rate_hz: float = 10.0
+    # Exported TorchScript policy: a path, or a file name inside models/.
+    model: str = "cchp_default.pt"
+    # The twist output is r + w (mean - r), r the context read (attention . the user's own
+    # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
+    # (rtcohand_drake.systems.policy).
+    correction_weight: float = 1.0
+
+
+def pack_context(pieces, dtype=np.float32):
+    """Context pieces [(features (T,36), labels (T,6)), ...] -> x_c (B,T,36), y_c (B,T,6), mask (B,T)."""
+    pieces = [(np.asarray(x, dtype), np.asarray(y, dtype)) for x, y in pieces if len(x)]
+    if not pieces:
+        raise ValueError("the policy needs at least one labelled context clip")
+    t_max = max(len(x) for x, _ in pieces)
+    x_c = np.zeros((len(pieces), t_max, 36), dtype)
+    y_c = np.zeros((len(pieces), t_max, 6), dtype)
+    mask = np.zeros((len(pieces), t_max), bool)
+    for i, (x, y) in enumerate(pieces):
+        x_c[i, : len(x)] = x
+        y_c[i, : len(y)] = y
+        mask[i, : len(x)] = True
+    return x_c, y_c, mask
+
+
+def blended_output(mean, attention, values, correction_weight: float) -> np.ndarray:
+    """r + w (mean - r), r = attention . values (one head for all dimensions, or head d for dimension d)."""
+    mean = np.asarray(mean, float)
+    if correction_weight == 1.0:
+        return mean
+    r = np.asarray(attention, float) @ np.asarray(values, float)
+    r = np.diagonal(r) if r.ndim == 2 else r
+    return r + correction_weight * (mean - r)
+
+
+class CchpPolicy(LeafSystem):
+    def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
+                 correction_weight: float = 1.0):
+        """`model_path`: an exported policy file, or a module already loaded by `load_policy`."""
+        super().__init__()
+        if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
+            raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
+        self.correction_weight = float(correction_weight)
+        import torch
+
+        torch.set_num_threads(1)  # one cheap step per period; do not compete with the simulator
+        self._torch = torch
+        if isinstance(model_path, (str, os.PathLike)):
+            self.module, self.model_path = load_policy(model_path), str(model_path)
+        else:  # an already loaded policy module
+            self.module, self.model_path = model_path, getattr(model_path, "source_path", "")
+        x_c, y_c, mask = pack_context(context_pieces)
+        with torch.no_grad():
+            keys, values, z_mu, z_sigma = self.module.encode_context(
+                torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
+        self._keys, self._values = keys.contiguous(), values.contiguous()
+        self._values_np = self._values.numpy().astype(np.float64)
+        self.z_mu, self.z_sigma = z_mu.numpy().astype(np.float64), z_sigma.numpy().astype(np.float64)
+        self.context_steps = int(keys.shape[0])
+        self._seed = int(seed)
+        self.period_s = 1.0 / rate_hz
+        H, Dz = int(self.module.hidden_size), int(self.module.latent_dim)
+        self._H, self._Dz = H, Dz
+        # TorchScript optimises a function on its first two calls (8-14 ms each here);
+        # do that now, not inside the first policy periods of a real-time run.
+        for _ in range(3):
+            self.step(np.zeros(36), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
+
+        self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
+        self._resume = self.DeclareVectorInputPort(RESUME_COUNT, 1)
+        self._h = self.DeclareDiscreteState(H)
+        self._c = self.DeclareDiscreteState(H)
+        self._y = self.DeclareDiscreteState(6)  # the module's own mean, fed back
+        self._std = self.DeclareDiscreteState(np.zeros(6))
+        self._z = self.DeclareDiscreteState(self.sample_z(0))
+        self._resumes = self.DeclareDiscreteState(np.zeros(1))
+        self._attn = self.DeclareDiscreteState(np.zeros(self.context_steps))
+        self._out = self.DeclareDiscreteState(6)  # the twist output (module docstring)
+        self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
+        self.DeclareStateOutputPort(POLICY_MEAN, self._out)
+        self.DeclareStateOutputPort(POLICY_STD, self._std)
+        self.DeclareStateOutputPort(ATTENTION, self._attn)
+
+    def sample_z(self, resume_count: int) -> np.ndarray:
+        """z ~ q(z|C), deterministic in (seed, resume_count)."""
+        rng = np.random.default_rng([self._seed, int(resume_count)])
+        return self.z_mu + self.z_sigma * rng.standard_normal(self._Dz)
+
+    def step(self, x, y_prev, h, c, z):
+        """One policy step in numpy: returns (mean, std, h, c, attention), all as the module gives them."""
+        torch = self._torch
+        f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
+        with torch.no_grad():
+            mean, std, h2, c2, attn = self.module.step(f32(x), f32(y_prev), f32(h), f32(c),
+                                                       self._keys, self._values, f32(z))
+        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn.numpy()
+
+    def _update(self, context, discrete_state):
+        get = lambda i: context.get_discrete_state(i).get_value()
+        h, c, y_prev, z = get(self._h), get(self._c), get(self._y), get(self._z)
+        if self._resume.HasValue(context):
+            resumes = float(self._resume.Eval(context)[0])
+            if resumes != get(self._resumes)[0]:
+                h, c, y_prev = np.zeros_like(h), np.zeros_like(c), np.zeros(6)
+                z = self.sample_z(int(resumes))
+                discrete_state.set_value(self._resumes, [resumes])
+                discrete_state.set_value(self._z, z)
+        x = np.asarray(self._x.Eval(context), float)
+        x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
+        mean, std, h, c, attn = self.step(x, y_prev, h, c, z)
+        out = blended_output(mean, attn, self._values_np, self.correction_weight)
+        if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
+                and np.all(np.isfinite(c))):
+            mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
+            h, c = np.zeros_like(h), np.zeros_like(c)
+        discrete_state.set_value(self._h, h)
+        discrete_state.set_value(self._c, c)
+        discrete_state.set_value(self._y, mean)
+        discrete_state.set_value(self._out, out)
+        discrete_state.set_value(self._std, std)
+        discrete_state.set_value(self._attn, attn.mean(axis=0) if attn.ndim == 2 else attn)

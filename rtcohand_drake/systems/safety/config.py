@@ -1,0 +1,48 @@
+"""The safety supervisor's settings: the `safety` key of a scenario (units in the names)."""
+
+# No `from __future__ import annotations`: Drake's yaml_load_typed reads the real field types.
+import dataclasses as dc
+
+
+@dc.dataclass
+class Safety:
+    """The safety supervisor between the filter and the differential IK."""
+
+    # Period of the supervisor's update (s).
+    period_s: float = 0.02
+    # Speed limits on the workpiece centre: ISO 10218 reduced speed 0.25 m/s.
+    max_linear_speed_m_s: float = 0.25
+    max_angular_speed_rad_s: float = 1.0
+    # Operator's sensitivity scale on the requested twist (Meshcat slider range).
+    sensitivity_default: float = 1.0
+    sensitivity_min: float = 0.25
+    sensitivity_max: float = 2.0
+    # A pause brings the workpiece to rest over this time (s).
+    pause_ramp_s: float = 0.5
+    # A gesture older than this (s), or flagged invalid, trips the watchdog.
+    stale_after_s: float = 0.3
+    # So does a hand-part velocity above this (m/s or rad/s): no hand moves that fast, so it
+    # is a tracking error (a fast hand moves at about 2-5 m/s, a wrist turns at up to ~15 rad/s).
+    max_plausible_feature: float = 25.0
+    # Minimum distance from the workpiece centre to the inspector's eye point (m).
+    min_inspector_distance_m: float = 0.55
+    # Look-ahead for the workspace and inspector-zone checks (s).
+    lookahead_s: float = 0.1
+    # Limit on how fast the output command may change (m/s^2, rad/s^2).
+    max_linear_accel_m_s2: float = 1.0
+    max_angular_accel_rad_s2: float = 6.0
+    # Mold exit corridor: while the workpiece centre is over the cavity (its opening
+    # plus this margin, m) and less than this height above the cavity floor (m), only
+    # motion along the mold's axis passes, so the hot part leaves the mold without
+    # touching its walls whatever the gesture asks. Default: the upright part (0.05 m
+    # half height) clears the 0.04 m walls at 0.09 m, plus 1 cm. 0 switches it off.
+    mold_exit_height_m: float = 0.10
+    # Above that, up to this height, turns are still removed over the cavity: a turning
+    # part sweeps its corners (0.094 m from its centre) below the centre, and must not
+    # swing one into the walls (0.04 m high): 0.04 + 0.094 + 1 cm. 0: turns free above
+    # the exit height.
+    mold_turn_height_m: float = 0.145
+    mold_exit_margin_m: float = 0.02
+    # ... and below this height of the workpiece centre over the cavity floor (m) it may
+    # not move down (the upright part rests at 0.052 m: python -m rtcohand_drake.initial_pose).
+    mold_seat_height_m: float = 0.055

@@ -1,0 +1,255 @@
+"""`SafetySupervisor`: the last software gate before the differential IK.
+
+Every `period_s` it turns the filtered twist request into the twist command:
+
+1. watchdog: a gesture flagged invalid, older than `stale_after_s`, with a
+   non-finite or physically implausible feature (a hand part faster than
+   `max_plausible_feature`), or a non-finite request, sets the target to zero,
+   and the command decays to zero within one command period (linearly, from
+   where it was);
+2. pause: the operator's pause brings the workpiece to rest over
+   `pause_ramp_s` and holds it; resume counts up `resume_count` (the policy
+   resamples its latent z and the filter forgets its history on a change);
+3. sensitivity: the request is scaled by the operator's factor, clipped to
+   [sensitivity_min, sensitivity_max];
+4. speed limits: |v| <= max_linear_speed_m_s and |w| <= max_angular_speed_rad_s
+   (direction kept);
+5. workspace box and inspector zone: the velocity component that would carry
+   the workpiece centre (looked ahead by `lookahead_s`) out of the workspace
+   box, or closer than `min_inspector_distance_m` to the inspector's eye, is
+   removed;
+6. the command changes no faster than the acceleration limits, except that
+   watchdog and pause decelerations are always allowed at their own rate.
+
+Input ports
+  twist_request   (6) [vx vy vz wx wy wz], user frame (from the filter)
+  gesture_status  (2) [valid (0/1), time of the gesture frame (s)]
+  gesture_features (36) optional: the features the policy reads, checked for sanity
+  workpiece.pose  (7) [x y z qw qx qy qz], world
+  operator        (2) [pause (0/1), sensitivity factor]
+Output ports
+  twist_command   (6) user frame, to the differential IK
+  status          (3) [mode, resume_count, interventions]: mode 0 running,
+                  1 paused, 2 watchdog; interventions is a bit set (1 speed
+                  clamp, 2 workspace, 4 inspector zone, 8 watchdog, 16 paused,
+                  32 non-finite request) of what acted at the last update.
+  resume_count    (1) number of resumes so far
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from rtcohand_drake.systems.diff_ik import clamp_twist
+from rtcohand_drake.cell.layout import Box
+from rtcohand_drake.systems.safety.config import Safety
+from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, OPERATOR, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
+
+
+class Mode(enum.IntEnum):
+    RUNNING = 0
+    PAUSED = 1
+    WATCHDOG = 2
+
+
+class Intervention(enum.IntFlag):
+    NONE = 0
+    SPEED_CLAMP = 1
+    WORKSPACE = 2
+    INSPECTOR_ZONE = 4
+    WATCHDOG = 8
+    PAUSED = 16
+    NON_FINITE = 32
+    MOLD_EXIT = 64
+
+
+# Half extents (m) of the mold's cavity in the mold frame, x and y: models/cell/mold.sdf
+# (walls 0.03 thick around a 0.166 x 0.116 opening).
+MOLD_CAVITY_HALF_XY = (0.083, 0.058)
+
+
+def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarray:
+    """v with its component along `normal_W` (unit, pointing out of the allowed set) removed if positive."""
+    along = float(v_W @ normal_W)
+    return v_W - along * normal_W if along > 0 else v_W
+
+
+def plausible_features(x: np.ndarray, config: Safety) -> bool:
+    """Finite, and no hand part moving faster than a hand can (m/s or rad/s)."""
+    x = np.asarray(x, float)
+    return bool(np.all(np.isfinite(x)) and np.max(np.abs(x), initial=0.0) <= config.max_plausible_feature)
+
+
+class SafetySupervisor(LeafSystem):
+    def __init__(self, config: Safety, workspace: Box, R_WU: np.ndarray, eye_W: np.ndarray,
+                 command_period_s: float, X_W_mold=None):
+        super().__init__()
+        self._cfg = config
+        # The mold's frame (origin: centre of the cavity floor, z up out of the cavity), or None.
+        self._X_mold_W = None if X_W_mold is None else X_W_mold.inverse()
+        self._mold_axis_W = None if X_W_mold is None else X_W_mold.rotation().matrix()[:, 2]
+        self._box_lo = np.asarray(workspace.min_xyz, float)
+        self._box_hi = np.asarray(workspace.max_xyz, float)
+        self._R_WU = np.asarray(R_WU, float)
+        self._eye = np.asarray(eye_W, float)
+        self._dt = config.period_s
+        # The watchdog brings the command to zero within one command period.
+        self._watchdog_ramp_s = min(command_period_s, config.pause_ramp_s)
+        self._request = self.DeclareVectorInputPort(TWIST_REQUEST, 6)
+        self._gesture = self.DeclareVectorInputPort(GESTURE_STATUS, 2)
+        self._features = self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
+        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
+        self._operator = self.DeclareVectorInputPort(OPERATOR, 2)
+        self._command = self.DeclareDiscreteState(np.zeros(6))
+        # [mode, resume_count, interventions, paused_input_last, ramp_from_norm_v, ramp_from_norm_w]
+        self._state = self.DeclareDiscreteState(np.zeros(6))
+        self.DeclarePeriodicDiscreteUpdateEvent(self._dt, 0.0, self._update)
+        self.DeclareStateOutputPort(TWIST_COMMAND, self._command)
+        self.DeclareVectorOutputPort(SAFETY_STATUS, 3, self._calc_status, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(RESUME_COUNT, 1, self._calc_resume, prerequisites_of_calc={self.xd_ticket()})
+
+    # --- the rules, each a small pure function of numbers -------------------------
+
+    def _mold_exit_position(self, p_W: np.ndarray) -> np.ndarray | None:
+        """The workpiece centre in the mold frame while it is in the exit corridor, else None."""
+        if self._X_mold_W is None or self._cfg.mold_exit_height_m <= 0.0:
+            return None
+        p = self._X_mold_W.multiply(p_W)
+        margin = self._cfg.mold_exit_margin_m
+        top = max(self._cfg.mold_exit_height_m, self._cfg.mold_turn_height_m)
+        inside = (abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
+                  and p[2] < top)
+        return p if inside else None
+
+    def limit_to_mold_exit(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
+        """In the mold's exit corridor only motion along the mold's axis passes: no turn, no
+        sideways move. Above it, up to the turn height, only the turns are removed."""
+        p_mold = self._mold_exit_position(p_W)
+        if p_mold is None:
+            return twist_U, Intervention.NONE
+        if p_mold[2] >= self._cfg.mold_exit_height_m:  # clear of the walls, but a turn could swing a corner into them
+            out = np.concatenate([twist_U[:3], np.zeros(3)])
+            acted = Intervention.MOLD_EXIT if np.max(np.abs(twist_U[3:])) > 1e-9 else Intervention.NONE
+            return out, acted
+        axis_W = self._mold_axis_W
+        v_W = self._R_WU @ twist_U[:3]
+        along = float(v_W @ axis_W)
+        if along < 0.0 and p_mold[2] <= self._cfg.mold_seat_height_m:
+            along = 0.0  # seated: pressing the part into the cavity floor only tilts it
+        out = np.zeros(6)
+        out[:3] = self._R_WU.T @ (axis_W * along)
+        acted = Intervention.MOLD_EXIT if np.max(np.abs(out - twist_U)) > 1e-9 else Intervention.NONE
+        return out, acted
+
+    def limit_to_zones(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
+        """Removes velocity that would leave the workspace box, enter the inspector zone, or
+        (in the mold's exit corridor) do anything but move along the mold's axis."""
+        twist_U, acted = self.limit_to_mold_exit(twist_U, p_W)
+        v_W = self._R_WU @ twist_U[:3]
+        ahead = p_W + v_W * self._cfg.lookahead_s
+        for axis in range(3):
+            normal = np.zeros(3)
+            normal[axis] = 1.0
+            if ahead[axis] > self._box_hi[axis] or p_W[axis] > self._box_hi[axis]:
+                v_new = remove_outward_component(v_W, normal)
+            elif ahead[axis] < self._box_lo[axis] or p_W[axis] < self._box_lo[axis]:
+                v_new = remove_outward_component(v_W, -normal)
+            else:
+                continue
+            if not np.allclose(v_new, v_W):
+                acted |= Intervention.WORKSPACE
+            v_W = v_new
+        to_part = p_W - self._eye
+        distance = np.linalg.norm(to_part)
+        ahead = p_W + v_W * self._cfg.lookahead_s
+        if np.linalg.norm(ahead - self._eye) < self._cfg.min_inspector_distance_m and distance > 1e-9:
+            v_new = remove_outward_component(v_W, -to_part / distance)  # no motion toward the eye
+            if not np.allclose(v_new, v_W):
+                acted |= Intervention.INSPECTOR_ZONE
+            v_W = v_new
+        out = twist_U.copy()
+        out[:3] = self._R_WU.T @ v_W
+        return out, acted
+
+    def _accel_step(self) -> np.ndarray:
+        return np.array([self._cfg.max_linear_accel_m_s2] * 3 + [self._cfg.max_angular_accel_rad_s2] * 3) * self._dt
+
+    # --- the update ---------------------------------------------------------------
+
+    def _update(self, context, discrete_state):
+        cfg = self._cfg
+        t = context.get_time()
+        command = context.get_discrete_state(self._command).get_value().copy()
+        mode, resumes, _, paused_last, ramp_v, ramp_w = context.get_discrete_state(self._state).get_value()
+        acted = Intervention.NONE
+
+        pause_in, sensitivity = self._operator.Eval(context)
+        paused = bool(pause_in >= 0.5)
+        if paused_last >= 0.5 and not paused:
+            resumes += 1  # a resume: the policy resamples z
+        valid, frame_time = self._gesture.Eval(context)
+        request = np.asarray(self._request.Eval(context), float)
+        if not np.all(np.isfinite(request)):
+            acted |= Intervention.NON_FINITE
+        stale = (valid < 0.5) or not np.isfinite(frame_time) or (t - frame_time > cfg.stale_after_s) \
+            or bool(acted & Intervention.NON_FINITE)
+        if self._features.HasValue(context) and not plausible_features(self._features.Eval(context), cfg):
+            stale = True
+            acted |= Intervention.NON_FINITE
+
+        if paused:
+            new_mode, ramp_s = Mode.PAUSED, cfg.pause_ramp_s
+            acted |= Intervention.PAUSED
+        elif stale:
+            new_mode, ramp_s = Mode.WATCHDOG, self._watchdog_ramp_s
+            acted |= Intervention.WATCHDOG
+        else:
+            new_mode, ramp_s = Mode.RUNNING, None
+
+        if ramp_s is not None:
+            if mode == Mode.RUNNING:  # a ramp to zero starts here; a pause <-> watchdog switch keeps it
+                ramp_v, ramp_w = np.linalg.norm(command[:3]), np.linalg.norm(command[3:])
+            command = self._ramp_to_zero(command, ramp_v, ramp_w, ramp_s)
+        else:
+            s = float(np.clip(sensitivity if np.isfinite(sensitivity) else cfg.sensitivity_default,
+                              cfg.sensitivity_min, cfg.sensitivity_max))
+            target = s * request
+            clamped = clamp_twist(target, cfg.max_linear_speed_m_s, cfg.max_angular_speed_rad_s)
+            if not np.allclose(clamped, target):
+                acted |= Intervention.SPEED_CLAMP
+            step = self._accel_step()
+            command = command + np.clip(clamped - command, -step, step)
+        # The zone rules act on the command actually sent, whatever the mode.
+        pose = self._pose.Eval(context)
+        if np.all(np.isfinite(pose)):
+            command, zones = self.limit_to_zones(command, pose[:3])
+            acted |= zones
+        else:
+            command[:] = 0.0
+            acted |= Intervention.NON_FINITE
+        command = clamp_twist(command, cfg.max_linear_speed_m_s, cfg.max_angular_speed_rad_s)
+        discrete_state.set_value(self._command, command)
+        discrete_state.set_value(self._state, np.array(
+            [float(new_mode), resumes, float(int(acted)), 1.0 if paused else 0.0, ramp_v, ramp_w]))
+
+    def _ramp_to_zero(self, command: np.ndarray, from_v: float, from_w: float, ramp_s: float) -> np.ndarray:
+        """Shrinks v and w toward zero, each at the rate that ends the ramp in `ramp_s`."""
+        out = command.copy()
+        for part, start in ((slice(0, 3), from_v), (slice(3, 6), from_w)):
+            norm = np.linalg.norm(out[part])
+            if norm <= 1e-12:
+                out[part] = 0.0
+                continue
+            new_norm = max(0.0, norm - max(start, norm) * self._dt / ramp_s)
+            out[part] *= new_norm / norm
+        return out
+
+    def _calc_status(self, context, output: BasicVector):
+        mode, resumes, acted, *_ = context.get_discrete_state(self._state).get_value()
+        output.SetFromVector([mode, resumes, acted])
+
+    def _calc_resume(self, context, output: BasicVector):
+        output.SetFromVector([context.get_discrete_state(self._state).get_value()[1]])
