@@ -23,7 +23,8 @@ from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity
 from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
 from rtcohand_drake.systems.operator_panel import MeshcatOperatorPanel, ScheduledOperatorPanel
 from rtcohand_drake.run_log import RunLog
-from rtcohand_drake.systems.safety.supervisor import Intervention, Mode, SafetySupervisor
+from rtcohand_drake.systems.safety.rules import RULES, Mode
+from rtcohand_drake.systems.safety.supervisor import SafetySupervisor
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
 from rtcohand_drake.cell.plant import eye_position
@@ -166,11 +167,9 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         (kinds[Mode(m)], f"supervisor {Mode(m).name.lower()}") if prev is not None or m != Mode.RUNNING
         else (None, "")))
     acted = status[:, 2].round().astype(int)
-    for flag, kind in ((Intervention.SPEED_CLAMP, "clamp"), (Intervention.WORKSPACE, "workspace"),
-                       (Intervention.INSPECTOR_ZONE, "inspector_zone"), (Intervention.MOLD_EXIT, "mold_exit"),
-                       (Intervention.NON_FINITE, "fault")):
-        on = (acted & int(flag)) != 0
-        _transition_events(log, t, on, lambda o, prev, kind=kind: (
+    for rule in RULES:
+        on = (acted & int(rule.flag)) != 0
+        _transition_events(log, t, on, lambda o, prev, kind=rule.event: (
             (kind, f"{kind} limit acting") if o else (None, "")))
 
     t, follow = _log_arrays(run.loggers["follow_status"], root_context)
@@ -184,7 +183,7 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
 
 def peak_speeds(times: np.ndarray, poses: np.ndarray) -> tuple[float, float]:
     """Peak linear (m/s) and angular (rad/s) speed of the workpiece from logged poses."""
-    from rtcohand_drake.analysis.inspection import quaternion_to_matrix
+    from rtcohand_drake.cell.geometry import quaternion_to_matrix
 
     if len(times) < 2:
         return 0.0, 0.0

@@ -26,7 +26,6 @@ import numpy as np
 
 from rtcohand_drake.errors import InputError, run_cli
 
-GESTURE_SOURCES = ("synthetic", "replay", "camera", "scripted")
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -43,9 +42,12 @@ def make_parser() -> argparse.ArgumentParser:
                    help="target real-time rate; 0 = as fast as possible (default 1 with Meshcat, 0 without)")
     p.add_argument("--no-meshcat", action="store_true", help="run headless")
     p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated operator")
-    p.add_argument("--gesture-source", choices=GESTURE_SOURCES, default=None,
-                   help="default: replay with --gesture-file, else synthetic")
-    p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (contracts §1)")
+    from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES
+
+    p.add_argument("--gesture-source", choices=tuple(GESTURE_SOURCES), default=None,
+                   help="; ".join(f"{name}: {entry.summary}" for name, entry in GESTURE_SOURCES.items())
+                   + " (default: replay with --gesture-file, else synthetic)")
+    p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order)")
     p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
@@ -56,7 +58,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", type=Path, default=None, help="exported TorchScript policy (default: the scenario's)")
     p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,
                    help="override the scenario's command_filter.mode")
-    p.add_argument("--log", type=Path, default=None, help="write the run log (HDF5, contracts §2)")
+    p.add_argument("--log", type=Path, default=None, help="write the run log (HDF5, docs/interfaces.md (the run log))")
     p.add_argument("--html", type=Path, default=None,
                    help="save the Meshcat animation as a standalone HTML file (default: beside --log)")
     p.add_argument("--hardware", action="store_true", help="drive the real arm (Kortex API) instead of the simulation")
@@ -95,83 +97,33 @@ def _resolve_model(args, scenario) -> Path:
     return args.model if args.model is not None else policy_file_path(scenario.policy.model)
 
 
-def _context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
-    """A user's own labelled clips from a dataset file, as (features, labels) pieces."""
-    from rtcohand_drake.data.dataset import load_policy_clips
-
-    clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
-    users = sorted({c.user for c in clips})
-    if not clips:
-        raise InputError(f"{path}: no labelled clips to use as context")
-    if user is None:
-        if len(users) > 1:
-            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user "
-                             f"({', '.join(users[:8])}{', ...' if len(users) > 8 else ''})")
-        user = users[0]
-    pieces = [(c.features, c.labels) for c in clips if c.user == user and c.name not in exclude]
-    if not pieces:
-        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {', '.join(users[:8])})")
-    return pieces, user
-
-
-def _replay_source(args, scenario):
-    from rtcohand_drake.data.dataset import find_clips, read_dataset, to_policy_clip
-    from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
-    from rtcohand_drake.data.hand_features import resample
-
-    raw = sorted(read_dataset(args.gesture_file), key=lambda c: (c.user, c.clip_id))
-    if args.clip is not None:
-        raw = find_clips(raw, args.clip)
-        if not raw:
-            raise InputError(f"{args.gesture_file}: no clip or user named {args.clip!r}")
-    rate = scenario.policy.rate_hz
-    clips = [to_policy_clip(c, rate) for c in raw]
-    skeletons = [resample(c.keypoints.reshape(len(c.keypoints), -1).astype(float), c.times, rate)[0] for c in raw]
-    source = ReplayGestureSource(clips, rate, skeletons)
-    users = sorted({c.user for c in raw})
-    return source, users, {c.name for c in clips}
-
-
 def _build(args, scenario, meshcat, station=None):
     from rtcohand_drake.diagram import build_run_diagram
+    from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES, make_gesture_source
 
-    if args.gesture_source == "scripted":
-        return build_run_diagram(scenario, meshcat=meshcat, station=station, gesture_source="scripted"), None
-    from rtcohand_drake.systems.policy import CchpPolicy
-
+    if not GESTURE_SOURCES[args.gesture_source].uses_policy:
+        setup = make_gesture_source(args.gesture_source, args, scenario)
+        return build_run_diagram(scenario, source=setup.source, meshcat=meshcat, station=station,
+                                 gesture_source=args.gesture_source), setup.end_time
+    from rtcohand_drake.data.dataset import context_pieces
     from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.systems.policy import CchpPolicy
 
     model_path = _resolve_model(args, scenario)
     model = load_policy(model_path)  # a bad model file fails before anything else is built
     model.source_path = str(model_path)
+    setup = make_gesture_source(args.gesture_source, args, scenario)
     rate = scenario.policy.rate_hz
-    end_time = None
-    if args.gesture_source == "replay":
-        source, users, names = _replay_source(args, scenario)
-        end_time = source.end_time
-        if args.context_file is not None:
-            pieces, _ = _context_pieces(args.context_file, args.context_user, rate)
-        else:  # the replayed user's other labelled clips in the same file
-            if len(users) != 1:
-                raise InputError(f"{args.gesture_file}: the replayed stream has {len(users)} users; "
-                                 "give their context with --context-file and --context-user")
-            pieces, _ = _context_pieces(args.gesture_file, users[0], rate, exclude=names)
-    elif args.gesture_source == "synthetic":
-        from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
-
-        from rtcohand_drake.data.population import DEFAULT_SEED
-
-        population = DEFAULT_SEED if args.population_seed is None else args.population_seed
-        source, builtin_pieces = make_builtin_person(scenario, seed=args.seed, user=args.user,
-                                                       population_seed=population)
-        pieces = (_context_pieces(args.context_file, args.context_user, rate)[0] if args.context_file
-                  else builtin_pieces)
+    if args.context_file is not None:
+        pieces, _ = context_pieces(args.context_file, args.context_user, rate)
+    elif setup.default_context is not None:
+        pieces = setup.default_context()
     else:
-        raise InputError("command line: --gesture-source camera needs a live hand tracker "
-                         "(pip install -e '.[camera]'); none is connected in this build")
+        raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
+                         "(the user's own labelled clips)")
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
-    return build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat, station=station,
-                             gesture_source=args.gesture_source), end_time
+    return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
+                             gesture_source=args.gesture_source), setup.end_time
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,11 +1,11 @@
-"""The run log (contracts §2): what a run commanded and what the robot did, as HDF5.
+"""The run log (docs/interfaces.md, the run log): what a run commanded and what the robot did, as HDF5.
 
 `RunLog` collects arrays and events during or after a run; `write_run_log`
 writes them atomically (a temporary file in the same directory, then a
 rename), so a crash never leaves a half-written log under the requested name.
 `read_run_log` reads one back (tests, notebooks, plots).
 
-Layout (contracts §2; extensions are marked +):
+Layout (docs/interfaces.md (the run log); extensions are marked +):
   /policy/time (P,) /policy/mean (P,6) /policy/std (P,6)
   /command/time (M,) /command/twist (M,6)
   /robot/time (K,) /robot/q (K,7) /robot/v (K,7) /robot/workpiece_pose (K,7)

@@ -60,7 +60,7 @@ class Scenario:
 
 # Fixed lengths of list fields, checked on load.
 _LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3,
-            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6, "clamp": 6}
+            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6, "clamp": 6, "mold_exit_half_xy_m": 2}
 
 
 def builtin_scenarios() -> list[str]:
@@ -155,7 +155,8 @@ def _check_values(s: Scenario, source: str) -> None:
          "safety: pause_ramp_s and stale_after_s must be > 0, lookahead_s >= 0")
     need(sa.max_linear_accel_m_s2 > 0 and sa.max_angular_accel_rad_s2 > 0,
          "safety acceleration limits must be > 0")
-    need(min(sa.mold_exit_height_m, sa.mold_turn_height_m, sa.mold_exit_margin_m, sa.mold_seat_height_m) >= 0,
+    need(min(sa.mold_exit_height_m, sa.mold_turn_height_m, sa.mold_exit_margin_m, sa.mold_seat_height_m,
+             *sa.mold_exit_half_xy_m) >= 0,
          "safety mold corridor heights and margin must be >= 0")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")

@@ -1,4 +1,4 @@
-"""The exported TorchScript policy (contracts §5) against the Python model."""
+"""The exported TorchScript policy (docs/interfaces.md, the exported policy) against the Python model."""
 
 import pathlib
 import subprocess

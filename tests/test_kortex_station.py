@@ -13,7 +13,7 @@ from rtcohand_drake.stations import kortex as kortex_station
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.stations.fake_kortex_arm import FakeKortexArm, FakeServerError
-from rtcohand_drake.analysis.inspection import quaternion_to_matrix
+from rtcohand_drake.cell.geometry import quaternion_to_matrix
 from rtcohand_drake.stations.kortex import (
     HardwareFault,
     KortexSession,

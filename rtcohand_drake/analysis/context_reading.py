@@ -5,7 +5,7 @@
 
 Before a new person drives the arm, their labelled clips can tell how well
 the policy will read them. The clips are split into `folds` groups; each group
-is played through the exported policy (contracts §5) with the other groups as
+is played through the exported policy (docs/interfaces.md, the exported policy) with the other groups as
 context, exactly as the run diagram runs it (zero start state, own mean fed
 back, z = the mean of q(z|C)). For each active dimension of each clip the
 *reading gain* is the mean predicted twist on that dimension over the steps

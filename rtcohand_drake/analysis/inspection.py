@@ -15,6 +15,7 @@ import numpy as np
 from pydrake.geometry import Role
 
 from rtcohand_drake.cell.faces import FACES
+from rtcohand_drake.cell.geometry import quaternion_to_matrix
 
 
 @dc.dataclass
@@ -23,18 +24,6 @@ class InspectionResult:
     faces_inspected: int
     completed: bool
     completion_time: float
-
-
-def quaternion_to_matrix(wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices (K,3,3) from unit quaternions (K,4) [w x y z]."""
-    q = np.asarray(wxyz, float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
 
 
 def face_angles_deg(poses: np.ndarray, eye_xyz) -> np.ndarray:

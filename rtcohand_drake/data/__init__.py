@@ -1,6 +1,6 @@
 """Gesture data: the dataset file, simulated users, context sampling and views of clips.
 
-- :mod:`rtcohand_drake.data.dataset`: the HDF5 file of contracts §1 (write, read, validate)
+- :mod:`rtcohand_drake.data.dataset`: the HDF5 file of docs/interfaces.md (the gesture dataset file) (write, read, validate)
   and clips at the policy rate.
 - :mod:`rtcohand_drake.data.population`: simulated users, hand model and handler labels.
 - :mod:`rtcohand_drake.data.generate`: ``python -m rtcohand_drake.data.generate --out PATH.h5``.

@@ -1,4 +1,4 @@
-"""The gesture dataset file (contracts §1): write, read and validate, and policy-rate clips.
+"""The gesture dataset file (docs/interfaces.md, the gesture dataset file): write, read and validate, and policy-rate clips.
 
 Layout (HDF5)::
 
@@ -229,7 +229,7 @@ def _clip_problem(group, split, fps, active_dims, keypoints, velocity, pose, tim
 
 
 def read_dataset(path: str | os.PathLike) -> list[Clip]:
-    """All clips of a dataset file, validated against contracts §1, in user then clip name order.
+    """All clips of a dataset file, validated against docs/interfaces.md (the gesture dataset file), in user then clip name order.
 
     Raises :class:`DatasetError` (one line: file, clip, problem) for any breach:
     unreadable or truncated file, unknown format/version, missing group or
@@ -381,3 +381,23 @@ def find_clips(clips: Iterable, spec: str) -> list:
         user, clip_id = spec.split("/", 1)
         return [c for c in clips if c.user == user and c.clip_id == clip_id]
     return [c for c in clips if c.user == spec]
+
+
+def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
+    """A user's own labelled clips from a dataset file, as (features, labels) pieces, and the user.
+
+    `user` may be None when the file holds one user; clips named in `exclude` are left out.
+    """
+    clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
+    users = sorted({c.user for c in clips})
+    if not clips:
+        raise InputError(f"{path}: no labelled clips to use as context")
+    if user is None:
+        if len(users) > 1:
+            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user "
+                             f"({', '.join(users[:8])}{', ...' if len(users) > 8 else ''})")
+        user = users[0]
+    pieces = [(c.features, c.labels) for c in clips if c.user == user and c.name not in exclude]
+    if not pieces:
+        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {', '.join(users[:8])})")
+    return pieces, user

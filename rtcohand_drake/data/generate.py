@@ -1,4 +1,4 @@
-"""Generate a simulated gesture dataset (contracts §1).
+"""Generate a simulated gesture dataset (docs/interfaces.md, the gesture dataset file).
 
     python -m rtcohand_drake.data.generate --out PATH.h5 [--users 15] [--seed N] [--fps 30]
 

@@ -3,7 +3,7 @@
 The policy sees, for each of six hand parts (palm, thumb, index, middle, ring,
 pinky, in that order), the linear and angular velocity of a frame attached to
 that part, expressed in the user frame U (X right, Y forward, Z up; see
-contracts §6). The vector is part-major::
+docs/interfaces.md (frames and the meaning of a twist)). The vector is part-major::
 
     x[6p : 6p+3]   = v_p   linear velocity of part p's frame origin, m/s, in U
     x[6p+3 : 6p+6] = w_p   angular velocity of part p's frame, rad/s, in U

@@ -9,7 +9,7 @@ Used by the notebooks::
 The hand is drawn in the user frame U (keypoints as spheres, bones as
 cylinders); the workpiece is a box whose pose integrates the clip's
 ``object_velocity`` (a twist in U: the box's centre moves with v and the box
-turns about its centre with w, contracts §6), placed ``box_offset_m`` to the
+turns about its centre with w, docs/interfaces.md (frames and the meaning of a twist)), placed ``box_offset_m`` to the
 side of the hand's first position. A frame where the hand was lost keeps the
 last seen hand. pydrake is imported inside the function, so this module loads
 without Drake.

@@ -1,4 +1,4 @@
-"""Evaluate trained policies on the six test settings of the paper (contracts §3).
+"""Evaluate trained policies on the six test settings of the paper (docs/interfaces.md, the command line).
 
     python -m rtcohand_drake.evaluate --data PATH.h5 --checkpoint CKPT [CKPT ...] --out DIR
         [--names NAME ...] [--seed 0] [--settings S ...] [--noise-sweep] [--spectrum] [--attention]
@@ -401,7 +401,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.evaluate", description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", required=True, help="gesture dataset file (contracts §1)")
+    p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--checkpoint", required=True, nargs="+", help="checkpoints; those with the same name are seeds")
     p.add_argument("--names", nargs="+", default=None, help="model names, one per checkpoint")
     p.add_argument("--out", required=True, help="output folder")

@@ -1,4 +1,4 @@
-"""Export a trained CCHP checkpoint as a TorchScript policy (contracts §5).
+"""Export a trained CCHP checkpoint as a TorchScript policy (docs/interfaces.md, the exported policy).
 
     python -m rtcohand_drake.export --checkpoint CKPT --out PATH.pt
 
@@ -202,7 +202,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--checkpoint", required=True, help="checkpoint written by rtcohand_drake.learning.train")
     p.add_argument("--out", required=True, help="TorchScript file to write (.pt)")
     args = p.parse_args(argv)
-    # TorchScript is the deployment format of contracts §5; its deprecation notice is noise here.
+    # TorchScript is the deployment format of docs/interfaces.md (the exported policy); its deprecation notice is noise here.
     warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
     out = export_checkpoint(args.checkpoint, args.out)
     load_policy(out)

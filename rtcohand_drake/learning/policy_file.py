@@ -1,4 +1,4 @@
-"""Loading an exported policy file (TorchScript, contracts §5), with one-line errors.
+"""Loading an exported policy file (TorchScript, docs/interfaces.md (the exported policy)), with one-line errors.
 
 Kept apart from the training code: the Drake systems load the exported file
 through this module and never import the model classes.

@@ -342,7 +342,7 @@ def plot_history(history: Dict[str, List], path: pathlib.Path, title: str = "") 
 def build_parser() -> argparse.ArgumentParser:
     d = TrainConfig()
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.train", description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", required=True, help="gesture dataset file (contracts §1)")
+    p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--model", choices=sorted(MODEL_KINDS), default=d.model)
     p.add_argument("--steps", type=int, default=d.steps)

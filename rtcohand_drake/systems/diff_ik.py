@@ -4,7 +4,7 @@
 control period. Each period it solves Drake's `DoDifferentialInverseKinematics`
 QP for the joint velocity that moves the workpiece centre with the commanded
 linear velocity v and turns the workpiece about its centre with the commanded
-angular velocity w (contracts §6; both given in the user frame U), subject to
+angular velocity w (docs/interfaces.md (frames and the meaning of a twist); both given in the user frame U), subject to
 joint position limits (with a margin), joint velocity and acceleration limits,
 and a Cartesian speed limit, with joint centering in the null space. Then the
 part of the answer that would drive the arm, gripper or part into the cell

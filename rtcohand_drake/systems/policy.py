@@ -1,6 +1,6 @@
 """`CchpPolicy`: the exported CCHP TorchScript policy as a Drake LeafSystem.
 
-The system loads the TorchScript file (contracts §5) once and keeps the
+The system loads the TorchScript file (docs/interfaces.md, the exported policy) once and keeps the
 module as an attribute; the recurrent state is numpy discrete state, so the
 context clones cleanly. The user's context clips are encoded once, at
 construction (keys, values, and the latent prior q(z|C) = N(z_mu, z_sigma)).

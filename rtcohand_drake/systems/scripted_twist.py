@@ -56,3 +56,10 @@ class ScriptedTwist(LeafSystem):
 
     def _calc_status(self, context, output: BasicVector):
         output.SetFromVector([1.0, context.get_time()])
+
+
+def from_options(options, scenario):
+    """The `scripted` source: the scenario's `scripted_motion`, no policy."""
+    from rtcohand_drake.systems.gestures.registry import GestureSetup
+
+    return GestureSetup(ScriptedTwist(scenario.scripted_motion))

@@ -10,6 +10,8 @@ from typing import Protocol
 
 import numpy as np
 
+from rtcohand_drake.errors import InputError
+
 from rtcohand_drake.systems.gestures.base import NAN_HAND, KeypointGestureSource
 
 
@@ -30,3 +32,9 @@ class CameraGestureSource(KeypointGestureSource):
     def keypoints_at(self, context) -> tuple[np.ndarray, float]:
         keypoints, frame_time = self.tracker.latest()
         return (NAN_HAND if keypoints is None else keypoints), float(frame_time)
+
+
+def from_options(options, scenario):
+    """The `camera` source: no tracker ships in this build, so this is a clear one-line error."""
+    raise InputError("command line: --gesture-source camera needs a live hand tracker "
+                     "(pip install -e '.[camera]'); none is connected in this build")

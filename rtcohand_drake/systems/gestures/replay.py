@@ -9,6 +9,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from rtcohand_drake.errors import InputError
 from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS
 from rtcohand_drake.systems.gestures.base import NAN_HAND
 
@@ -70,3 +71,34 @@ class ReplayGestureSource(LeafSystem):
             output.SetFromVector(self._skeletons[k])
         else:
             output.SetFromVector(NAN_HAND.reshape(-1))
+
+
+def from_options(options, scenario):
+    """The `replay` source: `options.gesture_file`, optionally one clip or user (`options.clip`).
+
+    Its default context is the replayed user's other labelled clips in the same file.
+    """
+    from rtcohand_drake.data.dataset import context_pieces, find_clips, read_dataset, to_policy_clip
+    from rtcohand_drake.data.hand_features import resample
+    from rtcohand_drake.systems.gestures.registry import GestureSetup
+
+    path = options.gesture_file
+    raw = sorted(read_dataset(path), key=lambda c: (c.user, c.clip_id))
+    if options.clip is not None:
+        raw = find_clips(raw, options.clip)
+        if not raw:
+            raise InputError(f"{path}: no clip or user named {options.clip!r}")
+    rate = scenario.policy.rate_hz
+    clips = [to_policy_clip(c, rate) for c in raw]
+    skeletons = [resample(c.keypoints.reshape(len(c.keypoints), -1).astype(float), c.times, rate)[0] for c in raw]
+    source = ReplayGestureSource(clips, rate, skeletons)
+    users = sorted({c.user for c in raw})
+    names = {c.name for c in clips}
+
+    def default_context():
+        if len(users) != 1:
+            raise InputError(f"{path}: the replayed stream has {len(users)} users; "
+                             "give their context with --context-file and --context-user")
+        return context_pieces(path, users[0], rate, exclude=names)[0]
+
+    return GestureSetup(source, default_context, source.end_time)

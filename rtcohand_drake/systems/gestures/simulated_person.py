@@ -596,3 +596,13 @@ def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
     X_WU = scenario.cell.user_frame.to_rigid_transform()
     operator = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed)
     return operator, pieces
+
+
+def from_options(options, scenario):
+    """The `synthetic` source: the built-in simulated person (`options.user`, `options.population_seed`,
+    `options.seed`); its default context is that person's own generated labelled clips."""
+    from rtcohand_drake.systems.gestures.registry import GestureSetup
+
+    population = DEFAULT_SEED if options.population_seed is None else options.population_seed
+    person, pieces = make_builtin_person(scenario, seed=options.seed, user=options.user, population_seed=population)
+    return GestureSetup(person, lambda: pieces)

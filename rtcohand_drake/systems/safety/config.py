@@ -43,6 +43,10 @@ class Safety:
     # the exit height.
     mold_turn_height_m: float = 0.145
     mold_exit_margin_m: float = 0.02
+    # Half extents (m, mold frame x and y) of the area over the cavity where the corridor
+    # applies, before the margin. It must cover the cavity of models/cell/mold.sdf (a test
+    # checks): 0.083 along x; 0.058 along y covers the 0.033 half width with 25 mm to spare.
+    mold_exit_half_xy_m: list[float] = dc.field(default_factory=lambda: [0.083, 0.058])
     # ... and below this height of the workpiece centre over the cavity floor (m) it may
     # not move down (the upright part rests at 0.052 m: python -m rtcohand_drake.initial_pose).
     mold_seat_height_m: float = 0.055

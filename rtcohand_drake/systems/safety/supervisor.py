@@ -29,7 +29,7 @@ Input ports
   operator        (2) [pause (0/1), sensitivity factor]
 Output ports
   twist_command   (6) user frame, to the differential IK
-  status          (3) [mode, resume_count, interventions]: mode 0 running,
+  safety_status   (3) [mode, resume_count, interventions]: mode 0 running,
                   1 paused, 2 watchdog; interventions is a bit set (1 speed
                   clamp, 2 workspace, 4 inspector zone, 8 watchdog, 16 paused,
                   32 non-finite request) of what acted at the last update.
@@ -38,49 +38,14 @@ Output ports
 
 from __future__ import annotations
 
-import enum
-
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.systems.diff_ik import clamp_twist
 from rtcohand_drake.cell.layout import Box
 from rtcohand_drake.systems.safety.config import Safety
+from rtcohand_drake.systems.safety.rules import Intervention, Mode, Zones, limit_to_zones, plausible_features
 from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, OPERATOR, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
-
-
-class Mode(enum.IntEnum):
-    RUNNING = 0
-    PAUSED = 1
-    WATCHDOG = 2
-
-
-class Intervention(enum.IntFlag):
-    NONE = 0
-    SPEED_CLAMP = 1
-    WORKSPACE = 2
-    INSPECTOR_ZONE = 4
-    WATCHDOG = 8
-    PAUSED = 16
-    NON_FINITE = 32
-    MOLD_EXIT = 64
-
-
-# Half extents (m) of the mold's cavity in the mold frame, x and y: models/cell/mold.sdf
-# (walls 0.03 thick around a 0.166 x 0.116 opening).
-MOLD_CAVITY_HALF_XY = (0.083, 0.058)
-
-
-def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarray:
-    """v with its component along `normal_W` (unit, pointing out of the allowed set) removed if positive."""
-    along = float(v_W @ normal_W)
-    return v_W - along * normal_W if along > 0 else v_W
-
-
-def plausible_features(x: np.ndarray, config: Safety) -> bool:
-    """Finite, and no hand part moving faster than a hand can (m/s or rad/s)."""
-    x = np.asarray(x, float)
-    return bool(np.all(np.isfinite(x)) and np.max(np.abs(x), initial=0.0) <= config.max_plausible_feature)
 
 
 class SafetySupervisor(LeafSystem):
@@ -89,12 +54,12 @@ class SafetySupervisor(LeafSystem):
         super().__init__()
         self._cfg = config
         # The mold's frame (origin: centre of the cavity floor, z up out of the cavity), or None.
-        self._X_mold_W = None if X_W_mold is None else X_W_mold.inverse()
-        self._mold_axis_W = None if X_W_mold is None else X_W_mold.rotation().matrix()[:, 2]
-        self._box_lo = np.asarray(workspace.min_xyz, float)
-        self._box_hi = np.asarray(workspace.max_xyz, float)
-        self._R_WU = np.asarray(R_WU, float)
-        self._eye = np.asarray(eye_W, float)
+        self.zones = Zones(
+            config=config, R_WU=np.asarray(R_WU, float),
+            box_lo=np.asarray(workspace.min_xyz, float), box_hi=np.asarray(workspace.max_xyz, float),
+            eye_W=np.asarray(eye_W, float),
+            X_mold_W=None if X_W_mold is None else X_W_mold.inverse(),
+            mold_axis_W=None if X_W_mold is None else X_W_mold.rotation().matrix()[:, 2])
         self._dt = config.period_s
         # The watchdog brings the command to zero within one command period.
         self._watchdog_ramp_s = min(command_period_s, config.pause_ramp_s)
@@ -111,68 +76,9 @@ class SafetySupervisor(LeafSystem):
         self.DeclareVectorOutputPort(SAFETY_STATUS, 3, self._calc_status, prerequisites_of_calc={self.xd_ticket()})
         self.DeclareVectorOutputPort(RESUME_COUNT, 1, self._calc_resume, prerequisites_of_calc={self.xd_ticket()})
 
-    # --- the rules, each a small pure function of numbers -------------------------
-
-    def _mold_exit_position(self, p_W: np.ndarray) -> np.ndarray | None:
-        """The workpiece centre in the mold frame while it is in the exit corridor, else None."""
-        if self._X_mold_W is None or self._cfg.mold_exit_height_m <= 0.0:
-            return None
-        p = self._X_mold_W.multiply(p_W)
-        margin = self._cfg.mold_exit_margin_m
-        top = max(self._cfg.mold_exit_height_m, self._cfg.mold_turn_height_m)
-        inside = (abs(p[0]) <= MOLD_CAVITY_HALF_XY[0] + margin and abs(p[1]) <= MOLD_CAVITY_HALF_XY[1] + margin
-                  and p[2] < top)
-        return p if inside else None
-
-    def limit_to_mold_exit(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
-        """In the mold's exit corridor only motion along the mold's axis passes: no turn, no
-        sideways move. Above it, up to the turn height, only the turns are removed."""
-        p_mold = self._mold_exit_position(p_W)
-        if p_mold is None:
-            return twist_U, Intervention.NONE
-        if p_mold[2] >= self._cfg.mold_exit_height_m:  # clear of the walls, but a turn could swing a corner into them
-            out = np.concatenate([twist_U[:3], np.zeros(3)])
-            acted = Intervention.MOLD_EXIT if np.max(np.abs(twist_U[3:])) > 1e-9 else Intervention.NONE
-            return out, acted
-        axis_W = self._mold_axis_W
-        v_W = self._R_WU @ twist_U[:3]
-        along = float(v_W @ axis_W)
-        if along < 0.0 and p_mold[2] <= self._cfg.mold_seat_height_m:
-            along = 0.0  # seated: pressing the part into the cavity floor only tilts it
-        out = np.zeros(6)
-        out[:3] = self._R_WU.T @ (axis_W * along)
-        acted = Intervention.MOLD_EXIT if np.max(np.abs(out - twist_U)) > 1e-9 else Intervention.NONE
-        return out, acted
-
     def limit_to_zones(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
-        """Removes velocity that would leave the workspace box, enter the inspector zone, or
-        (in the mold's exit corridor) do anything but move along the mold's axis."""
-        twist_U, acted = self.limit_to_mold_exit(twist_U, p_W)
-        v_W = self._R_WU @ twist_U[:3]
-        ahead = p_W + v_W * self._cfg.lookahead_s
-        for axis in range(3):
-            normal = np.zeros(3)
-            normal[axis] = 1.0
-            if ahead[axis] > self._box_hi[axis] or p_W[axis] > self._box_hi[axis]:
-                v_new = remove_outward_component(v_W, normal)
-            elif ahead[axis] < self._box_lo[axis] or p_W[axis] < self._box_lo[axis]:
-                v_new = remove_outward_component(v_W, -normal)
-            else:
-                continue
-            if not np.allclose(v_new, v_W):
-                acted |= Intervention.WORKSPACE
-            v_W = v_new
-        to_part = p_W - self._eye
-        distance = np.linalg.norm(to_part)
-        ahead = p_W + v_W * self._cfg.lookahead_s
-        if np.linalg.norm(ahead - self._eye) < self._cfg.min_inspector_distance_m and distance > 1e-9:
-            v_new = remove_outward_component(v_W, -to_part / distance)  # no motion toward the eye
-            if not np.allclose(v_new, v_W):
-                acted |= Intervention.INSPECTOR_ZONE
-            v_W = v_new
-        out = twist_U.copy()
-        out[:3] = self._R_WU.T @ v_W
-        return out, acted
+        """The zone rules of `rules.RULES` (mold corridor, workspace box, inspector zone) on a command."""
+        return limit_to_zones(twist_U, p_W, self.zones)
 
     def _accel_step(self) -> np.ndarray:
         return np.array([self._cfg.max_linear_accel_m_s2] * 3 + [self._cfg.max_angular_accel_rad_s2] * 3) * self._dt

@@ -1,0 +1,53 @@
+"""The gesture sources by name: what `python -m rtcohand_drake.run --gesture-source NAME` builds.
+
+Each entry names a factory `from_options(options, scenario) -> GestureSetup`,
+where `options` carries the run command's flags (`seed`, `user`,
+`population_seed`, `gesture_file`, `clip`, ...; see `rtcohand_drake.run`).
+A new source is one module with such a factory and one row here. Factories
+are imported only when their source is chosen, so a source with heavy
+dependencies (a camera stack) costs nothing to the others.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import importlib
+from typing import Callable
+
+
+@dc.dataclass(frozen=True)
+class GestureSourceEntry:
+    module: str
+    summary: str
+    factory: str = "from_options"
+    uses_policy: bool = True  # False: the source outputs `twist_request` itself (no policy, no filter)
+
+
+@dc.dataclass
+class GestureSetup:
+    """A built source, the context it brings, and where its stream ends."""
+
+    source: object  # a LeafSystem with the gesture-source ports (or `twist_request` without a policy)
+    # The user's own labelled clips as policy context when the run gives no --context-file:
+    # a callable returning [(features (T, 36), labels (T, 6)), ...]; None when the source has none.
+    default_context: Callable[[], list] | None = None
+    end_time: float | None = None  # seconds, for a finite stream (the run ends there by default)
+
+
+GESTURE_SOURCES: dict[str, GestureSourceEntry] = {
+    "synthetic": GestureSourceEntry("rtcohand_drake.systems.gestures.simulated_person",
+                                    "the built-in simulated person, in closed loop (--user, --population-seed)"),
+    "replay": GestureSourceEntry("rtcohand_drake.systems.gestures.replay",
+                                 "clips of a dataset file, back to back (--gesture-file, --clip)"),
+    "camera": GestureSourceEntry("rtcohand_drake.systems.gestures.camera", "a live hand tracker"),
+    "scripted": GestureSourceEntry("rtcohand_drake.systems.scripted_twist",
+                                   "the scenario's scripted_motion, straight to the supervisor (no policy)",
+                                   uses_policy=False),
+}
+
+
+def make_gesture_source(name: str, options, scenario) -> GestureSetup:
+    """Builds the source registered as `name` (a KeyError names an unregistered one)."""
+    entry = GESTURE_SOURCES[name]
+    factory = getattr(importlib.import_module(entry.module), entry.factory)
+    return factory(options, scenario)
