@@ -14,13 +14,13 @@ from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.stations.fake_kortex_arm import FakeKortexArm, FakeServerError
 from rtcohand_drake.cell.geometry import quaternion_to_matrix
-from rtcohand_drake.stations.kortex import (
+from rtcohand_drake.stations.kortex import make_kortex_station
+from rtcohand_drake.stations.kortex_session import (
     HardwareFault,
     KortexSession,
     deg_s_to_rad_s,
     feedback_to_rad,
     load_kortex_api,
-    make_kortex_station,
     rad_s_to_deg_s,
     wrap_to_pi,
 )
@@ -479,7 +479,7 @@ def test_exit_without_close_still_stops_the_arm():
     script = (
         "import atexit\n"
         "from rtcohand_drake.stations.fake_kortex_arm import FakeKortexArm\n"
-        "from rtcohand_drake.stations.kortex import KortexSession\n"
+        "from rtcohand_drake.stations.kortex_session import KortexSession\n"
         "arm = FakeKortexArm()\n"
         "atexit.register(lambda: print(','.join(arm.call_names())))\n"  # runs after the session's hook
         f"KortexSession(arm.api(), {ROBOT_IP!r}).open().send_joint_speeds([5.0] + [0.0] * 6)\n"

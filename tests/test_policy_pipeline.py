@@ -11,7 +11,8 @@ from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
 from rtcohand_drake.learning.policy_file import PolicyFileError, load_policy
-from rtcohand_drake.systems.policy import CchpPolicy, pack_context
+from rtcohand_drake.data.sampling import pack_context
+from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.interfaces import GESTURE_FEATURES, RESUME_COUNT
 

@@ -90,7 +90,7 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
     """The policy's output (T, 6) over every clip, each played with the other folds as context."""
     import torch
 
-    from rtcohand_drake.systems.policy import pack_context
+    from rtcohand_drake.data.sampling import pack_context
 
     if len(clips) < 2:
         raise ValueError("need at least two labelled clips (one to play, one as context)")

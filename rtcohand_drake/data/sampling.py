@@ -219,26 +219,45 @@ class ContextSet:
         return x, y
 
 
+def pack_context(
+    pieces: Sequence[Piece], max_len: int | None = None, drop_empty: bool = True, dtype=np.float32
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Context pieces [(features (T, 36), labels (T, 6)), ...] as one padded batch.
+
+    Returns x_c (P, T, 36), y_c (P, T, 6) and mask (P, T) bool (True on real
+    steps): a row per piece, zero-padded to the longest (or cut to ``max_len``
+    steps, keeping the first ones). Non-finite values (frames where the hand
+    was not seen) become 0. ``drop_empty`` leaves out zero-length pieces and
+    needs at least one piece left; the exported policy's `encode_context`
+    takes the result as it is.
+    """
+    if drop_empty:
+        pieces = [p for p in pieces if len(p[0])]
+        if not pieces:
+            raise ValueError("a context needs at least one non-empty labelled piece")
+    T = max((len(x) for x, _ in pieces), default=0)
+    if max_len is not None:
+        T = min(T, max_len)
+    x_c = np.zeros((len(pieces), T, FEATURE_DIM), dtype)
+    y_c = np.zeros((len(pieces), T, 6), dtype)
+    mask = np.zeros((len(pieces), T), bool)
+    for b, (x, y) in enumerate(pieces):
+        k = min(len(x), T)
+        x_c[b, :k] = np.nan_to_num(np.asarray(x[:k], dtype), nan=0.0, posinf=0.0, neginf=0.0)
+        y_c[b, :k] = np.nan_to_num(np.asarray(y[:k], dtype), nan=0.0, posinf=0.0, neginf=0.0)
+        mask[b, :k] = True
+    return x_c, y_c, mask
+
+
 def collate_contexts(
     contexts: Sequence[Sequence[Piece] | ContextSet], max_len: int | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batch contexts: x_c (B, T, 36), y_c (B, T, 6), mask (B, T) bool (True on real steps).
 
-    Each context's pieces are concatenated in time and zero-padded to the
-    longest (or cut to ``max_len`` steps, keeping the first ones).
+    Each context's pieces are concatenated in time, then packed (`pack_context`).
     """
     joined = [(c if isinstance(c, ContextSet) else ContextSet(list(c))).concat() for c in contexts]
-    T = max((x.shape[0] for x, _ in joined), default=0)
-    if max_len is not None:
-        T = min(T, max_len)
-    B = len(joined)
-    x_c = np.zeros((B, T, FEATURE_DIM), np.float32)
-    y_c = np.zeros((B, T, 6), np.float32)
-    mask = np.zeros((B, T), bool)
-    for b, (x, y) in enumerate(joined):
-        k = min(x.shape[0], T)
-        x_c[b, :k], y_c[b, :k], mask[b, :k] = x[:k], y[:k], True
-    return x_c, y_c, mask
+    return pack_context(joined, max_len=max_len, drop_empty=False)
 
 
 def add_feature_noise(

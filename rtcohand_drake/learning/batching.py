@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 import torch
+
+from rtcohand_drake.data.sampling import pack_context
 
 Piece = Tuple[np.ndarray, np.ndarray]  # (features (T, 36), labels (T, 6))
 
@@ -79,22 +81,4 @@ def collate(
 
 def collate_context(pieces: Sequence[Piece]) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One context as the exported `encode_context` takes it: (P, Tc, 36), (P, Tc, 6), (P, Tc) bool."""
-    if not pieces:
-        raise ValueError("a context needs at least one piece")
-    tc = max(len(f) for f, _ in pieces)
-    x = np.zeros((len(pieces), tc, 36), np.float32)
-    y = np.zeros((len(pieces), tc, 6), np.float32)
-    m = np.zeros((len(pieces), tc), bool)
-    for j, (f, l) in enumerate(pieces):
-        x[j, : len(f)] = _finite(f)
-        y[j, : len(f)] = _finite(l)
-        m[j, : len(f)] = True
-    return torch.from_numpy(x), torch.from_numpy(y), torch.from_numpy(m)
-
-
-def concat_pieces(pieces: List[Piece]) -> Piece:
-    """The pieces of one context joined in time."""
-    return (
-        np.concatenate([np.asarray(f, np.float32) for f, _ in pieces], 0),
-        np.concatenate([np.asarray(l, np.float32) for _, l in pieces], 0),
-    )
+    return tuple(torch.from_numpy(a) for a in pack_context(pieces))

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.learning.policy_file import PolicyFileError
+from rtcohand_drake.learning.policy_file import PolicyFileError, torch_archive_kind
 from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
 from rtcohand_drake.learning.nets.lstm import DummyLstm, LstmConfig
 from rtcohand_drake.learning.nets.ranp import Ranp, RanpConfig
@@ -75,13 +75,8 @@ def save_checkpoint(path: os.PathLike, model: nn.Module, train_config: Dict[str,
 def read_checkpoint(path: os.PathLike) -> Dict[str, Any]:
     """The checkpoint dictionary, checked; CheckpointError on any problem."""
     path = pathlib.Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    if not zipfile.is_zipfile(path):
-        raise CheckpointError(f"{path}: not a checkpoint (not a PyTorch archive; truncated or corrupt?)")
-    with zipfile.ZipFile(path) as archive:
-        if any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist()):
-            raise CheckpointError(f"{path}: is an exported TorchScript policy, not a training checkpoint")
+    if torch_archive_kind(path, "checkpoint") == "torchscript":
+        raise CheckpointError(f"{path}: is an exported TorchScript policy, not a training checkpoint")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except (RuntimeError, pickle.UnpicklingError, zipfile.BadZipFile, EOFError, OSError, ValueError, AttributeError,

@@ -19,19 +19,32 @@ class PolicyFileError(InputError):
     """A model file (exported policy or training checkpoint) that cannot be used; one line naming the file."""
 
 
+_NAMES = {"policy": "TorchScript policy", "checkpoint": "checkpoint"}
+
+
+def torch_archive_kind(path: os.PathLike, expected: str) -> str:
+    """"torchscript" or "pickle" for a PyTorch archive (the two model files), else a PolicyFileError.
+
+    `expected` ("policy" or "checkpoint") names the file the caller wants, in the messages.
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise PolicyFileError(f"{path}: no such {expected} file")
+    if not zipfile.is_zipfile(path):
+        raise PolicyFileError(f"{path}: not a {_NAMES[expected]} (not a PyTorch archive; truncated or corrupt?)")
+    with zipfile.ZipFile(path) as archive:
+        scripted = any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist())
+    return "torchscript" if scripted else "pickle"
+
+
 def load_policy(path: os.PathLike):
     """Loads an exported policy; a missing, corrupt or wrong file is a PolicyFileError naming it."""
     import torch
 
     path = pathlib.Path(path)
-    if not path.is_file():
-        raise PolicyFileError(f"{path}: no such policy file")
-    if not zipfile.is_zipfile(path):
-        raise PolicyFileError(f"{path}: not a TorchScript policy (not a PyTorch archive; truncated or corrupt?)")
-    with zipfile.ZipFile(path) as archive:
-        if not any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist()):
-            raise PolicyFileError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
-                                  "python -m rtcohand_drake.export)")
+    if torch_archive_kind(path, "policy") != "torchscript":
+        raise PolicyFileError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
+                              "python -m rtcohand_drake.export)")
     try:
         module = torch.jit.load(str(path), map_location="cpu")
     except Exception as err:  # torch raises RuntimeError and others for a damaged archive

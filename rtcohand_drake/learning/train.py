@@ -21,6 +21,7 @@ import math
 import os
 import pathlib
 import sys
+import typing
 import time
 from dataclasses import asdict, dataclass
 from typing import Dict, List, Optional, Sequence
@@ -339,42 +340,32 @@ def plot_history(history: Dict[str, List], path: pathlib.Path, title: str = "") 
 # --------------------------------------------------------------------------- CLI
 
 
+# Help texts of the flags that need more than their name; every TrainConfig field is a flag.
+_FLAG_HELP = {
+    "tf_schedule": "'curriculum' (hold --tf-start for --tf-hold-steps, then linear decay to --tf-end) or 'fixed:P'",
+    "tf_decay_steps": "steps of the linear decay after the hold; 0 (default): it ends at the last step",
+    "n_user": "further context clips from the target's own user, as in deployment (0: the paper's sampler)",
+    "nll_beta": "0: the paper's plain -ELBO; >0: beta-NLL weighting of the likelihood term",
+    "readout_weight": "CCHP: weight of a loss on the context read r(t) itself predicting the twist (0: off)",
+    "threads": "torch threads per process (0: default)",
+    "max_minutes": "stop and save after this wall time",
+}
+_FLAG_TYPE = {"tf_schedule": parse_tf_schedule}
+
+
 def build_parser() -> argparse.ArgumentParser:
-    d = TrainConfig()
+    """--data, --out, then one flag per TrainConfig field (--batch-size for batch_size), then the model's."""
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--model", choices=sorted(MODEL_KINDS), default=d.model)
-    p.add_argument("--steps", type=int, default=d.steps)
-    p.add_argument("--batch-size", type=int, default=d.batch_size)
-    p.add_argument("--lr", type=float, default=d.lr)
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--tf-schedule", type=parse_tf_schedule, default=d.tf_schedule,
-                   help="'curriculum' (hold --tf-start for --tf-hold-steps, then linear decay to --tf-end) or 'fixed:P'")
-    p.add_argument("--tf-start", type=float, default=d.tf_start)
-    p.add_argument("--tf-hold-steps", type=int, default=d.tf_hold_steps)
-    p.add_argument("--tf-end", type=float, default=d.tf_end)
-    p.add_argument("--tf-decay-steps", type=int, default=d.tf_decay_steps,
-                   help="steps of the linear decay after the hold; 0 (default): it ends at the last step")
-    p.add_argument("--p-d", type=float, default=d.p_d)
-    p.add_argument("--p-u", type=float, default=d.p_u)
-    p.add_argument("--n-random", type=int, default=d.n_random)
-    p.add_argument("--n-user", type=int, default=d.n_user,
-                   help="further context clips from the target's own user, as in deployment (0: the paper's sampler)")
-    p.add_argument("--t-min", type=int, default=d.t_min)
-    p.add_argument("--p-cxt", type=float, default=d.p_cxt)
-    p.add_argument("--x-noise-std", type=float, default=d.x_noise_std)
-    p.add_argument("--nll-beta", type=float, default=d.nll_beta,
-                   help="0: the paper's plain -ELBO; >0: beta-NLL weighting of the likelihood term")
-    p.add_argument("--readout-weight", type=float, default=d.readout_weight,
-                   help="CCHP: weight of a loss on the context read r(t) itself predicting the twist (0: off)")
-    p.add_argument("--rate-hz", type=float, default=d.rate_hz)
-    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    p.add_argument("--validate-every", type=int, default=d.validate_every)
-    p.add_argument("--validation-episodes", type=int, default=d.validation_episodes)
-    p.add_argument("--log-every", type=int, default=d.log_every)
-    p.add_argument("--threads", type=int, default=d.threads, help="torch threads per process (0: default)")
-    p.add_argument("--max-minutes", type=float, default=d.max_minutes, help="stop and save after this wall time")
+    hints = typing.get_type_hints(TrainConfig)
+    for field in dataclasses.fields(TrainConfig):
+        kwargs = {"default": field.default, "help": _FLAG_HELP.get(field.name)}
+        if field.name == "model":
+            kwargs["choices"] = sorted(MODEL_KINDS)
+        else:
+            kwargs["type"] = _FLAG_TYPE.get(field.name, hints[field.name])
+        p.add_argument("--" + field.name.replace("_", "-"), **kwargs)
     p.add_argument("--model-config", default=None,
                    help="JSON object overriding model sizes, e.g. '{\"attention_heads\": 6}'")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

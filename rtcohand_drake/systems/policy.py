@@ -39,6 +39,7 @@ import os
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.learning.policy_file import load_policy
 from rtcohand_drake.interfaces import ATTENTION, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD, RESUME_COUNT
 
@@ -55,22 +56,6 @@ class Policy:
     # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
     # (rtcohand_drake.systems.policy).
     correction_weight: float = 1.0
-
-
-def pack_context(pieces, dtype=np.float32):
-    """Context pieces [(features (T,36), labels (T,6)), ...] -> x_c (B,T,36), y_c (B,T,6), mask (B,T)."""
-    pieces = [(np.asarray(x, dtype), np.asarray(y, dtype)) for x, y in pieces if len(x)]
-    if not pieces:
-        raise ValueError("the policy needs at least one labelled context clip")
-    t_max = max(len(x) for x, _ in pieces)
-    x_c = np.zeros((len(pieces), t_max, 36), dtype)
-    y_c = np.zeros((len(pieces), t_max, 6), dtype)
-    mask = np.zeros((len(pieces), t_max), bool)
-    for i, (x, y) in enumerate(pieces):
-        x_c[i, : len(x)] = x
-        y_c[i, : len(y)] = y
-        mask[i, : len(x)] = True
-    return x_c, y_c, mask
 
 
 def blended_output(mean, attention, values, correction_weight: float) -> np.ndarray:
