@@ -23,7 +23,8 @@ from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity
 from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
 from rtcohand_drake.systems.operator_panel import MeshcatOperatorPanel, ScheduledOperatorPanel
 from rtcohand_drake.run_log import RunLog
-from rtcohand_drake.systems.safety.rules import RULES, Mode
+from rtcohand_drake.systems.safety import rules
+from rtcohand_drake.systems.safety.rules import Mode
 from rtcohand_drake.systems.safety.supervisor import SafetySupervisor
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
@@ -167,7 +168,7 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         (kinds[Mode(m)], f"supervisor {Mode(m).name.lower()}") if prev is not None or m != Mode.RUNNING
         else (None, "")))
     acted = status[:, 2].round().astype(int)
-    for rule in RULES:
+    for rule in rules.RULES:  # the same table the supervisor applies
         on = (acted & int(rule.flag)) != 0
         _transition_events(log, t, on, lambda o, prev, kind=rule.event: (
             (kind, f"{kind} limit acting") if o else (None, "")))

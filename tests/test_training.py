@@ -39,11 +39,11 @@ def trained(tiny_data, tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
     paths = {}
     for model in ("cchp", "ranp", "lstm"):
-        run = _run("rtcohand_drake.learning.train", "--data", str(tiny_data), "--out", str(out / model), "--model", model,
+        run = _run("rtcohand_drake.train", "--data", str(tiny_data), "--out", str(out / model), "--model", model,
                    *TRAIN_ARGS)
         assert run.returncode == 0, run.stderr
         paths[model] = out / model / "checkpoint.pt"
-    run = _run("rtcohand_drake.learning.train", "--data", str(tiny_data), "--out", str(out / "fixed"), "--model", "cchp",
+    run = _run("rtcohand_drake.train", "--data", str(tiny_data), "--out", str(out / "fixed"), "--model", "cchp",
                "--tf-schedule", "fixed:0.9", "--seed", "1", *TRAIN_ARGS)
     assert run.returncode == 0, run.stderr
     paths["fixed"] = out / "fixed" / "checkpoint.pt"
@@ -63,7 +63,7 @@ def test_each_model_trains_and_writes_its_outputs(trained):
 
 def test_export_and_reload(trained, tmp_path):
     out = tmp_path / "policy.pt"
-    run = _run("rtcohand_drake.learning.export", "--checkpoint", str(trained["cchp"]), "--out", str(out))
+    run = _run("rtcohand_drake.export", "--checkpoint", str(trained["cchp"]), "--out", str(out))
     assert run.returncode == 0, run.stderr
     policy = load_policy(out)
     keys, values, z_mu, z_sigma = policy.encode_context(torch.zeros(1, 8, 36), torch.zeros(1, 8, 6),
@@ -71,12 +71,12 @@ def test_export_and_reload(trained, tmp_path):
     mean, std, h, c, att = policy.step(torch.zeros(36), torch.zeros(6), torch.zeros(policy.hidden_size),
                                        torch.zeros(policy.hidden_size), keys, values, z_mu)
     assert torch.isfinite(mean).all() and att.shape == (8,)
-    run = _run("rtcohand_drake.learning.export", "--checkpoint", str(trained["ranp"]), "--out", str(tmp_path / "r.pt"))
+    run = _run("rtcohand_drake.export", "--checkpoint", str(trained["ranp"]), "--out", str(tmp_path / "r.pt"))
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1
 
 
 def test_evaluate_writes_the_six_settings(tiny_data, trained, tmp_path):
-    run = _run("rtcohand_drake.learning.evaluate", "--data", str(tiny_data), "--checkpoint", str(trained["cchp"]),
+    run = _run("rtcohand_drake.evaluate", "--data", str(tiny_data), "--checkpoint", str(trained["cchp"]),
                str(trained["fixed"]), str(trained["ranp"]), str(trained["lstm"]), "--out", str(tmp_path),
                "--noise-sweep", "--spectrum", "--attention", "--max-episodes", "6")
     assert run.returncode == 0, run.stderr
@@ -98,9 +98,9 @@ def test_bad_inputs_are_one_line_errors(tiny_data, trained, tmp_path):
     not_h5 = tmp_path / "bad.h5"
     not_h5.write_bytes(b"junk")
     cases = [
-        ("rtcohand_drake.learning.evaluate", "--data", str(tiny_data), "--checkpoint", str(bad), "--out", str(tmp_path / "e")),
-        ("rtcohand_drake.learning.evaluate", "--data", str(not_h5), "--checkpoint", str(trained["cchp"]), "--out", str(tmp_path / "e")),
-        ("rtcohand_drake.learning.train", "--data", str(not_h5), "--out", str(tmp_path / "t"), "--steps", "1"),
+        ("rtcohand_drake.evaluate", "--data", str(tiny_data), "--checkpoint", str(bad), "--out", str(tmp_path / "e")),
+        ("rtcohand_drake.evaluate", "--data", str(not_h5), "--checkpoint", str(trained["cchp"]), "--out", str(tmp_path / "e")),
+        ("rtcohand_drake.train", "--data", str(not_h5), "--out", str(tmp_path / "t"), "--steps", "1"),
     ]
     for args in cases:
         run = _run(*args)
@@ -113,7 +113,7 @@ def test_bad_inputs_are_one_line_errors(tiny_data, trained, tmp_path):
 def test_torchrun_two_processes_on_gloo(tiny_data, tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1")
     run = subprocess.run([str(BIN / "torchrun"), "--nproc_per_node", "2", "--master_port", "29533", "-m",
-                          "rtcohand_drake.learning.train", "--data", str(tiny_data), "--out", str(tmp_path), "--steps", "3",
+                          "rtcohand_drake.train", "--data", str(tiny_data), "--out", str(tmp_path), "--steps", "3",
                           "--batch-size", "4", "--validate-every", "2", "--validation-episodes", "4", "--quiet"],
                          capture_output=True, text=True, env=env, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]

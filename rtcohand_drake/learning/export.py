@@ -199,7 +199,7 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.export", description="Export a CCHP checkpoint as TorchScript.")
-    p.add_argument("--checkpoint", required=True, help="checkpoint written by rtcohand_drake.learning.train")
+    p.add_argument("--checkpoint", required=True, help="checkpoint written by python -m rtcohand_drake.train")
     p.add_argument("--out", required=True, help="TorchScript file to write (.pt)")
     args = p.parse_args(argv)
     # TorchScript is the deployment format of docs/interfaces.md (the exported policy); its deprecation notice is noise here.

@@ -32,7 +32,8 @@ Output ports
   safety_status   (3) [mode, resume_count, interventions]: mode 0 running,
                   1 paused, 2 watchdog; interventions is a bit set (1 speed
                   clamp, 2 workspace, 4 inspector zone, 8 watchdog, 16 paused,
-                  32 non-finite request) of what acted at the last update.
+                  32 non-finite request, 64 mold exit corridor) of what acted at the last
+                  update (the table `rules.RULES` names each).
   resume_count    (1) number of resumes so far
 """
 
