@@ -2,7 +2,7 @@
 
     python benchmarks/bench_diagram.py [--repeats 3] [--duration 30] [--clips 12]
 
-1. Real-time factor: the built-in simulated operator -> shipped CCHP policy ->
+1. Real-time factor: the built-in simulated person -> shipped CCHP policy ->
    filter -> safety -> diff IK -> simulated Gen3, headless, as fast as possible;
    median simulated-seconds per wall-second over the repeats.
 2. Onset latency, in the paper's mode (2 Hz mean of 10 predictions) and in the

@@ -6,7 +6,7 @@
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
 --no-meshcat --user U --duration D --log DIR/U.h5` for each user (the
-built-in simulated operator is that user, acting in closed loop; the policy's
+built-in simulated person is that user, acting in closed loop; the policy's
 context is that user's own labelled clips) and prints one table row per user
 from the run log: faces inspected, completion time, the closest approach to
 the mold walls and of the arm, gripper and part to the cell (table, mold,

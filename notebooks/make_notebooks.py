@@ -126,7 +126,7 @@ NEW_USER = [
 CCHP is not retrained per person: it reads a new user's own labelled clips as
 context. Here a user the policy never saw in training (an out-sample user of
 the simulated population) records their clips, we look at them, and then the
-run uses them as context while the built-in operator, acting as that user,
+run uses them as context while the built-in simulated person, acting as that user,
 inspects the part."""),
     new_code_cell(SHORT + '''
 import subprocess, sys, tempfile

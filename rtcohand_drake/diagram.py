@@ -4,7 +4,7 @@
         -> TwistToJointVelocity (diff IK) -> station (simulated Gen3 or Kortex arm)
 
 or, without a policy, a scripted twist source straight into the supervisor.
-An operator system (Meshcat panel or scripted) feeds the supervisor's pause and
+An operator panel (Meshcat, or a schedule of pauses) feeds the supervisor's pause and
 sensitivity input. `VectorLogSink`s record everything the run log needs, and a
 `MeshcatVisualizer` (plus the hand/twist/status overlay) draws the run when a
 Meshcat is given. `RunDiagram` keeps handles to the pieces.
@@ -72,7 +72,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     connect(operator.GetOutputPort(OPERATOR), supervisor.GetInputPort(OPERATOR))
     connect(source.GetOutputPort(GESTURE_STATUS), supervisor.GetInputPort(GESTURE_STATUS))
     connect(station.GetOutputPort(WORKPIECE_POSE), supervisor.GetInputPort(WORKPIECE_POSE))
-    if source.HasInputPort(WORKPIECE_POSE):  # a closed-loop source (the simulated operator) watches the part
+    if source.HasInputPort(WORKPIECE_POSE):  # a closed-loop source (the simulated person) watches the part
         connect(station.GetOutputPort(WORKPIECE_POSE), source.GetInputPort(WORKPIECE_POSE))
     command_filter = None
     if policy is not None:
@@ -83,7 +83,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         connect(source.GetOutputPort(GESTURE_FEATURES), supervisor.GetInputPort(GESTURE_FEATURES))
         connect(supervisor.GetOutputPort(RESUME_COUNT), policy.GetInputPort(RESUME_COUNT))
         if policy.HasInputPort(INTENDED_TWIST) and source.HasOutputPort(INTENDED_TWIST):
-            # A reference policy (operator_sim.IntentPolicy) reads what the simulated person means.
+            # A reference policy (analysis.reference_policies.IntentPolicy) reads what the simulated person means.
             connect(source.GetOutputPort(INTENDED_TWIST), policy.GetInputPort(INTENDED_TWIST))
         connect(supervisor.GetOutputPort(RESUME_COUNT), command_filter.GetInputPort(RESUME_COUNT))
         connect(policy.GetOutputPort(POLICY_MEAN), command_filter.GetInputPort(POLICY_MEAN))

@@ -41,7 +41,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime-rate", type=float, default=None,
                    help="target real-time rate; 0 = as fast as possible (default 1 with Meshcat, 0 without)")
     p.add_argument("--no-meshcat", action="store_true", help="run headless")
-    p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated operator")
+    p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated person")
     from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES
 
     p.add_argument("--gesture-source", choices=tuple(GESTURE_SOURCES), default=None,
@@ -51,9 +51,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order)")
     p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
-    p.add_argument("--user", default=None, help="the simulated operator's user id (synthetic source)")
+    p.add_argument("--user", default=None, help="the simulated person's user id (synthetic source)")
     p.add_argument("--population-seed", type=int, default=None,
-                   help="the generated population the simulated operator comes from (data.generate --seed; "
+                   help="the generated population the simulated person comes from (data.generate --seed; "
                         "default 0, the benchmark's)")
     p.add_argument("--model", type=Path, default=None, help="exported TorchScript policy (default: the scenario's)")
     p.add_argument("--filter-mode", choices=("paper", "responsive"), default=None,

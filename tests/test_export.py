@@ -21,10 +21,10 @@ def _clip(rng, n):
     return rng.normal(size=(n, 36)).astype(np.float32) * 0.3, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
 
 
-def _model(heads=1, key_source="state", kernel="dot", read_skip=False):
+def _model(heads=1, key_source="state", kernel="dot", read_skip=False, read="attention", window=0):
     torch.manual_seed(0)
     model = Cchp(CchpConfig(attention_heads=heads, key_source=key_source, attention_kernel=kernel,
-                            read_skip=read_skip)).eval()
+                            read_skip=read_skip, read=read, phi_window=window)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     return model
 
@@ -46,11 +46,13 @@ def _run_policy(policy, target_x, context, z=None):
     return torch.stack(means), atts, (keys, values, z_mu, z_sigma)
 
 
-@pytest.mark.parametrize("heads,key_source,kernel,skip", [
-    (1, "state", "dot", False), (6, "state", "dot", False), (1, "gesture", "dot", False),
-    (1, "gesture", "distance", True), (6, "gesture", "distance", True)])
-def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, skip):
-    model = _model(heads, key_source, kernel, skip)
+@pytest.mark.parametrize("heads,key_source,kernel,skip,read,window", [
+    (1, "state", "dot", False, "attention", 0), (6, "state", "dot", False, "attention", 0),
+    (1, "gesture", "dot", False, "attention", 0), (1, "gesture", "distance", True, "attention", 0),
+    (6, "gesture", "distance", True, "attention", 0), (1, "gesture", "distance", True, "bayes_linear", 0),
+    (1, "gesture", "distance", True, "bayes_linear", 10)])
+def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, skip, read, window):
+    model = _model(heads, key_source, kernel, skip, read, window)
     rng = np.random.default_rng(heads)
     target = _clip(rng, 45)
     context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]
@@ -65,9 +67,11 @@ def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, sk
     assert z_mu.shape == (policy.latent_dim,) and z_sigma.shape == (policy.latent_dim,)
     assert torch.all(z_sigma > 0)
     assert atts[0].shape == ((k,) if heads == 1 else (heads, k))
-    assert torch.allclose(atts[0].sum(-1), torch.ones(()), atol=1e-5)
+    if read == "attention":  # a softmax; the Bayesian linear read's equivalent kernel is signed
+        assert torch.allclose(atts[0].sum(-1), torch.ones(()), atol=1e-5)
     assert policy.feature_dim == 36 and policy.latent_dim == 32
-    assert policy.hidden_size == 128 + (model.cfg.gesture_hidden_size if key_source == "gesture" else 0)
+    assert policy.hidden_size == 128 + (model.cfg.gesture_hidden_size if key_source == "gesture" else 0) + \
+        max(0, window - 1) * 36
     assert torch.allclose(values, torch.from_numpy(np.concatenate([p[1] for p in context])))
 
 

@@ -78,14 +78,14 @@ def _run_kinematic_loop(scenario, op, duration_s):
     phases = []
 
     def watch(root):
-        phase = op.operator_state(op.GetMyContextFromRoot(root)).phase
+        phase = op.person_state(op.GetMyContextFromRoot(root)).phase
         if not phases or phases[-1] != phase:
             phases.append(phase)
 
     simulator.set_monitor(lambda root: watch(root))
     simulator.AdvanceTo(duration_s)
     data = log.FindLog(simulator.get_context())
-    return data.sample_times().copy(), data.data().T.copy(), phases, op.operator_state(
+    return data.sample_times().copy(), data.data().T.copy(), phases, op.person_state(
         op.GetMyContextFromRoot(simulator.get_context()))
 
 

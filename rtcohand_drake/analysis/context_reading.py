@@ -14,11 +14,13 @@ where its label is above 30 % of its peak, divided by the label's mean there:
 speed the person meant, a negative gain moves it the wrong way.
 
 The table lists the 12 motions (dimension and sign) with the median gain of
-their clips and a verdict: `reads` (>= 0.5), `weak` (0.2 .. 0.5), `poor`
+their clips, the same gain for a ridge regression fitted on the same folds
+(the fitted-to-the-person reference, the bar the policy must clear), and a verdict: `reads` (>= 0.5), `weak` (0.2 .. 0.5), `poor`
 (< 0.2, or the wrong way). A poorly read gesture is worth re-recording or
 replacing by a more distinct one before the session. The last lines give the
 median gain over all clips and the held-out squared error of the output as a
-share of commanding zero twist (the "Own" evaluation setting, in six folds).
+share of commanding zero twist (the "Own" evaluation setting, in six folds),
+for the policy and for the reference.
 """
 
 from __future__ import annotations
@@ -106,6 +108,24 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
     return means
 
 
+def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, window: int = 10,
+                             lam: float = 100.0) -> list[np.ndarray]:
+    """The fitted-to-the-person reference over every clip: a ridge regression solved on the other
+    folds (`rtcohand_drake.learning.ridge_reference`), the same folds as `held_out_means`."""
+    from rtcohand_drake.learning.ridge_reference import RidgeReference
+
+    if len(clips) < 2:
+        raise ValueError("need at least two labelled clips (one to play, one as context)")
+    folds = max(2, min(folds, len(clips)))
+    means: list = [None] * len(clips)
+    for f in range(folds):
+        ridge = RidgeReference(window, lam).fit(
+            [(c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
+        for i in range(f, len(clips), folds):
+            means[i] = ridge.predict(clips[i].features)
+    return means
+
+
 def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6, correction_weight: float = 1.0,
                       means: Sequence[np.ndarray] | None = None) -> list[ClipReading]:
     """The reading gain on each active dimension of every clip, played with the other folds as context
@@ -158,8 +178,9 @@ def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[
     return mine, user
 
 
-def builtin_clips(user: str, rate_hz: float) -> list[LabelledClip]:
-    """The labelled clips of a built-in simulated user (as `operator_sim.make_builtin_person` makes them)."""
+def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None) -> list[LabelledClip]:
+    """The labelled clips of a built-in simulated user (as `make_builtin_person` makes them), from the
+    default population or the one `data.generate --seed population_seed` writes."""
     from rtcohand_drake.data.dataset import to_policy_clip
     from rtcohand_drake.data.population import GeneratorConfig, simulate_user
     from rtcohand_drake.data.population import DEFAULT_SEED
@@ -168,7 +189,8 @@ def builtin_clips(user: str, rate_hz: float) -> list[LabelledClip]:
     ids = population_user_ids()
     if user not in ids:
         raise InputError(f"--user: unknown user {user!r}; valid ids: {', '.join(ids)}")
-    _, raw, _ = simulate_user(GeneratorConfig(), list(ids).index(user), ids[user], DEFAULT_SEED)
+    seed = DEFAULT_SEED if population_seed is None else population_seed
+    _, raw, _ = simulate_user(GeneratorConfig(), list(ids).index(user), ids[user], seed)
     out = []
     for clip in raw:
         pc = to_policy_clip(clip, rate_hz)
@@ -181,6 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--context-file", type=Path, default=None, help="dataset file with the user's labelled clips")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
     p.add_argument("--user", default=None, help="a built-in simulated user instead (u00 .. u14)")
+    p.add_argument("--population-seed", type=int, default=None,
+                   help="with --user: the generated population (data.generate --seed; default 0, the benchmark's)")
     p.add_argument("--scenario", default="inspection",
                    help="scenario whose policy settings (model, correction_weight) are checked")
     p.add_argument("--model", type=Path, default=None, help="exported policy (default: the scenario's)")
@@ -191,6 +215,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if (args.context_file is None) == (args.user is None):
         raise InputError("command line: give either --context-file (with --context-user) or --user")
+    if args.population_seed is not None and args.user is None:
+        raise InputError("command line: --population-seed goes with --user")
     if args.folds < 2:
         raise InputError("command line: --folds must be >= 2")
     from rtcohand_drake.cell.robot_files import policy_file_path
@@ -204,23 +230,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     model = args.model or policy_file_path(scenario.policy.model)
     module = load_policy(model)
     if args.user is not None:
-        clips, who = builtin_clips(args.user, args.rate_hz), args.user
+        clips, who = builtin_clips(args.user, args.rate_hz, args.population_seed), args.user
     else:
         clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz)
     means = held_out_means(module, clips, args.folds, weight)
     readings = held_out_readings(module, clips, means=means)
-    error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(means, clips))
+    reference = held_out_reference_means(clips, args.folds)
+    reference_gains = {name: gain for name, _, gain, _ in
+                       motion_table(held_out_readings(None, clips, means=reference))}
     zero = sum(float((c.labels ** 2).sum()) for c in clips)
+    error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(means, clips)) / max(zero, 1e-12)
+    reference_error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(reference, clips)) / max(zero, 1e-12)
     rows = motion_table(readings)
     print(f"user {who}: {len(clips)} labelled clips, each read with the other {args.folds - 1} "
           f"of {args.folds} folds as context; policy {model.name}, correction weight {weight:g}")
-    print("| motion | clips | reading gain (median) | verdict |")
-    print("|---|---|---|---|")
+    print("| motion | clips | reading gain (median) | verdict | ridge reference gain |")
+    print("|---|---|---|---|---|")
     for name, n, gain, word in rows:
-        print(f"| {name} | {n} | {gain:+.2f} | {word} |")
+        print(f"| {name} | {n} | {gain:+.2f} | {word} | {reference_gains.get(name, float('nan')):+.2f} |")
     print(f"median reading gain over all {len(readings)} clip motions: "
           f"{np.median([r.gain for r in readings]):+.2f}")
-    print(f"held-out squared error over all clips: {error / max(zero, 1e-12):.3f} of commanding zero twist")
+    print(f"held-out squared error over all clips: {error:.3f} of commanding zero twist "
+          f"(ridge fitted to the person's other clips: {reference_error:.3f})")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
     return 0

@@ -55,7 +55,7 @@ One more setting is not in the paper and not in the default six:
 - ``Own``: the deployed setting. Target from D_test,out; the context is every
   other labelled clip of the target's user (all whole clips; for an
   out-sample user, the rest of their 72), no random clips. This is what the
-  run CLI gives the policy for the built-in operator.
+  run CLI gives the policy for the built-in simulated person.
 
 In every paper setting the two random clips are drawn uniformly from the D_train
 clips other than the chosen one (any user). A target with no clip matching

@@ -19,6 +19,10 @@ Metrics per setting, averaged over the setting's episodes:
 - mse: mean over steps and the 6 motion dimensions of (y - mean)^2, in
   (m/s)^2 and (rad/s)^2, free-running, z = the mean of q(z|C).
 
+Two references get a row in every table: always commanding zero twist, and
+a ridge regression fitted on exactly each episode's context
+(`rtcohand_drake.learning.ridge_reference`, the last 1 s of features).
+
 Writes DIR/results.json, DIR/results.md, and with the options the figures
 noise_sweep.png, spectrum.png, attention.png.
 """
@@ -121,6 +125,19 @@ def zero_twist_mse(episodes: Sequence) -> Optional[float]:
     return float(np.mean([np.mean(np.asarray(e.target.labels, np.float64) ** 2) for e in episodes]))
 
 
+def ridge_reference_mse(episodes: Sequence, window: int = 10, lam: float = 100.0) -> Optional[float]:
+    """MSE of a ridge regression fitted on each episode's own context (`RidgeReference`), like the models' MSE."""
+    from rtcohand_drake.learning.ridge_reference import RidgeReference
+
+    if not episodes:
+        return None
+    errors = []
+    for e in episodes:
+        pred = RidgeReference(window, lam).fit(e.context).predict(e.target_features)
+        errors.append(float(np.mean((np.asarray(e.target.labels, np.float64) - pred) ** 2)))
+    return float(np.mean(errors))
+
+
 def _mean_std(values: List[Optional[float]]) -> Tuple[Optional[float], Optional[float]]:
     vals = [v for v in values if v is not None and math.isfinite(v)]
     if not vals:
@@ -186,6 +203,10 @@ def markdown_report(results: Dict) -> str:
     if zero:
         lines.append("| zero twist (reference) | - | " + " | ".join(
             "n/a" if zero.get(s) is None else f"n/a / {zero[s]:.4g}" for s in shown) + " |")
+    ridge = results.get("reference", {}).get("ridge_mse", {})
+    if ridge:
+        lines.append("| ridge fitted to the context (reference) | - | " + " | ".join(
+            "n/a" if ridge.get(s) is None else f"n/a / {ridge[s]:.4g}" for s in shown) + " |")
     lines += ["", "Episodes per setting: " + ", ".join(
         f"{s} {results['episodes'].get(s, 0)}" for s in shown), ""]
     lines += ["## The paper's values (its real data; compare the ordering, not the numbers)", "",
@@ -337,7 +358,10 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
     results: Dict = {"data": str(data), "seed": seed, "settings": list(settings),
                      "episodes": {s: len(episodes[s]) for s in settings}, "models": {},
                      # A policy that always commands zero twist: the floor any useful model must beat.
-                     "reference": {"zero_twist_mse": {s: zero_twist_mse(episodes[s]) for s in settings}}}
+                     "reference": {"zero_twist_mse": {s: zero_twist_mse(episodes[s]) for s in settings},
+                                   # Fitted to each episode's own context: the bar a context read must clear.
+                                   "ridge_mse": {s: ridge_reference_mse(episodes[s]) for s in settings},
+                                   "ridge": {"window": 10, "lam": 100.0}}}
     for name, entry in per_model.items():
         agg = {}
         for s in settings:

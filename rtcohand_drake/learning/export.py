@@ -51,7 +51,12 @@ class CchpPolicy(nn.Module):
         cfg = model.cfg
         self.feature_dim = FEATURE_DIM
         self.motion_dim = MOTION_DIM
-        self.hidden_size = cfg.state_size  # h and c carry the gesture cell's state too, when there is one
+        # h and c carry the gesture cell's state too, when there is one, and with a windowed Bayesian
+        # linear read, h also the last (phi_window - 1) normalised frames (c zeros there).
+        self.state_size = cfg.state_size
+        self.phi_window = int(cfg.phi_window) if model.blr is not None else 0
+        self.buffer_size = max(0, self.phi_window - 1) * FEATURE_DIM
+        self.hidden_size = cfg.state_size + self.buffer_size
         self.cell_size = cfg.hidden_size
         self.key_offset = model.attention.key_offset
         self.latent_dim = cfg.latent_dim
@@ -75,6 +80,18 @@ class CchpPolicy(nn.Module):
         self.mu_head = model.latent.mu_head
         self.sigma_head = model.latent.sigma_head
         self.kq = model.attention.kq
+        # The Bayesian linear read (CchpConfig.read "bayes_linear"): keys are [Phi A, Phi] (K, 2d),
+        # so a step reads r = a . values with a = (Phi A) phi, and v = 1 + (|phi|^2 - a . (Phi phi)) / lambda
+        # (= 1 + phi^T A phi). A 1-unit placeholder projection otherwise; never run.
+        self.bayes_linear = model.blr is not None
+        self.phi_proj = model.blr.proj if model.blr is not None else nn.Linear(1, 1)
+        self.has_window_proj = model.blr is not None and model.blr.window_proj is not None
+        self.window_proj = model.blr.window_proj if self.has_window_proj else nn.Linear(1, 1)
+        self.phi_raw = bool(model.blr.raw) if model.blr is not None else False
+        self.phi_dim = int(model.blr.dim) if model.blr is not None else 0
+        self.blr_lambda = float(model.blr.lam.detach()) if model.blr is not None else 1.0
+        if model.blr is not None:
+            self.key_size = 2 * self.phi_dim
         # Per-dimension output MLPs as (6, in, out) weights and (6, 1, out) biases for bmm.
         self.out_weights: List[torch.Tensor] = [w.detach().clone() for w in model.output.net.weights]
         self.out_biases: List[torch.Tensor] = [b.detach().clone().unsqueeze(1) for b in model.output.net.biases]
@@ -86,10 +103,19 @@ class CchpPolicy(nn.Module):
         hand_feat = torch.relu(self.hand(torch.cat([finger_feat, h_main], 1)))
         h2, c2 = self.lstm(torch.cat([hand_feat, y_prev_n], 1), (h_main, c[:, :n]))
         if self.has_gesture_cell:
-            g, cg = self.gesture(finger_feat, (h[:, n:], c[:, n:]))
+            g, cg = self.gesture(finger_feat, (h[:, n:self.state_size], c[:, n:self.state_size]))
             h2 = torch.cat([h2, g], 1)
             c2 = torch.cat([c2, cg], 1)
         return h2, c2
+
+    def _phi(self, g: torch.Tensor, x_n: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
+        parts = [self.phi_proj(g)]
+        if self.phi_raw:
+            parts.append(x_n)
+        if self.has_window_proj:
+            parts.append(self.window_proj(window))
+        parts.append(torch.ones(g.size(0), 1))
+        return torch.cat(parts, 1)
 
     @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
@@ -108,8 +134,8 @@ class CchpPolicy(nn.Module):
         x = torch.nan_to_num(x_c.to(torch.float32), 0.0, 0.0, 0.0) / self.feature_scale
         y = y_c.to(torch.float32) / self.label_scale
         fingers = self.fingers(x.reshape(b, t_len, 6, 6)).reshape(b, t_len, -1)
-        h = torch.zeros(b, self.hidden_size)
-        c = torch.zeros(b, self.hidden_size)
+        h = torch.zeros(b, self.state_size)
+        c = torch.zeros(b, self.state_size)
         y_prev = torch.zeros(b, self.motion_dim)
         hs: List[torch.Tensor] = []
         for t in range(t_len):
@@ -118,7 +144,18 @@ class CchpPolicy(nn.Module):
             y_prev = y[:, t]
         h_all = torch.stack(hs, 1)[mask]  # (K, H)
         y_valid = y[mask]  # (K, 6), normalised
-        keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
+        if self.bayes_linear:
+            if self.has_window_proj:
+                padded = nn.functional.pad(x, [0, 0, self.phi_window - 1, 0])
+                win = torch.cat([padded[:, k : k + t_len] for k in range(self.phi_window)], 2)[mask]
+            else:
+                win = torch.zeros(1, 1)
+            phi = self._phi(h_all[:, self.cell_size:self.state_size], x[mask], win)  # (K, d)
+            gram = torch.mm(phi.t(), phi) + self.blr_lambda * torch.eye(self.phi_dim)
+            A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
+            keys = torch.cat([torch.mm(phi, A), phi], 1)  # (K, 2d)
+        else:
+            keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
         g = self.trunk(s)
         z_mu = self.mu_head(g)[0]
@@ -126,13 +163,8 @@ class CchpPolicy(nn.Module):
         values = y_c.to(torch.float32)[mask]
         return keys, values, z_mu, z_sigma
 
-    @torch.jit.export
-    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
-        finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
-        h2, c2 = self._cell(finger_feat, (y_prev / self.label_scale).view(1, -1), h.view(1, -1), c.view(1, -1))
+    def _attention(self, h2: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """Softmax attention weights (heads, K) of the step's query over the context keys."""
         q = self.kq(h2[:, self.key_offset:])  # (1, heads * key_size)
         if self.distance_kernel:
             k = keys.size(0)
@@ -144,8 +176,32 @@ class CchpPolicy(nn.Module):
             k = keys.size(0)
             scores = (keys.view(k, self.attention_heads, self.key_size)
                       * q.view(1, self.attention_heads, self.key_size)).sum(2).t()  # (heads, K)
-        weights = torch.softmax(scores, 1)
+        return torch.softmax(scores, 1)
+
+    @torch.jit.export
+    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
+        finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
+        h_in = h.view(1, -1)
+        h2, c2 = self._cell(finger_feat, (y_prev / self.label_scale).view(1, -1), h_in[:, :self.state_size],
+                            c.view(1, -1)[:, :self.state_size])
+        variance_factor = torch.ones(1)
+        window = torch.zeros(1, 1)
+        if self.has_window_proj:
+            window = torch.cat([h_in[:, self.state_size:], x.view(1, -1)], 1)  # the last frames, oldest first
+        if self.bayes_linear:
+            d = self.phi_dim
+            phi = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # (1, d)
+            weights = torch.mm(phi, keys[:, :d].t())  # (1, K): the equivalent kernel, signed
+            kernel = torch.mm(phi, keys[:, d:].t())  # (1, K): Phi phi
+            variance_factor = 1.0 + torch.clamp(((phi * phi).sum() - (weights * kernel).sum()) / self.blr_lambda,
+                                                min=0.0).view(1)
+        else:
+            weights = self._attention(h2, keys)
         r = torch.mm(weights, values) / self.label_scale  # (heads, 6)
+
         hz = torch.cat([h2, z.view(1, -1)], 1)
         inp = torch.cat([r.expand(6, 6), hz.expand(6, hz.size(1))], 1).unsqueeze(1)  # (6, 1, in)
         n_layers = len(self.out_weights)
@@ -162,7 +218,11 @@ class CchpPolicy(nn.Module):
             mean_n = mean_n + torch.diagonal(r.expand(6, 6))
         mean = mean_n * scale
         std = (self.std_min + (1.0 - self.std_min) * nn.functional.softplus(out[:, 1])) * scale
+        std = std * torch.sqrt(variance_factor)
         attention = weights[0] if self.attention_heads == 1 else weights
+        if self.buffer_size > 0:  # carry the newest (phi_window - 1) frames to the next step
+            h2 = torch.cat([h2, window[:, self.feature_dim:]], 1)
+            c2 = torch.cat([c2, torch.zeros(1, self.buffer_size)], 1)
         return mean, std, h2.view(-1), c2.view(-1), attention
 
 

@@ -194,7 +194,9 @@ def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = 
     model.to(device)
     net: nn.Module = model
     if world > 1:
-        net = nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+        # The Bayesian linear read leaves the attention's projection unused.
+        net = nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None,
+                                                  find_unused_parameters=getattr(model, "blr", None) is not None)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     order_rng = np.random.default_rng(cfg.seed)  # the same on every rank: one global order
     context_rng = np.random.default_rng([cfg.seed, rank])

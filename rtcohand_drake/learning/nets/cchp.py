@@ -59,6 +59,19 @@ class CchpConfig:
     # True: the mean is the context read plus f_y's output (f_y learns a
     # correction to the read); False: f_y's output alone (paper).
     read_skip: bool = False
+    # How the context is read: "attention", a softmax over the context steps (paper), or
+    # "bayes_linear", a closed-form Bayesian linear regression of the context's labels on
+    # gesture features phi(t) (`BayesLinearRead`; needs key_source "gesture"). phi is a learned
+    # projection (phi_size) of the gesture cell's state, plus the normalised features x(t)
+    # themselves when phi_raw, plus a constant; blr_lambda is the initial prior precision.
+    read: str = "attention"
+    phi_size: int = 64
+    phi_raw: bool = True
+    blr_lambda: float = 30.0
+    # phi also holds a learned projection (phi_window_size) of the last phi_window frames of
+    # the normalised features (0: none); the exported step carries those frames in its state.
+    phi_window: int = 0
+    phi_window_size: int = 64
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
@@ -189,6 +202,68 @@ class ContextAttention(nn.Module):
         return torch.matmul(weights, values), weights
 
 
+class BayesLinearRead(nn.Module):
+    """The context read as a Bayesian linear regression over learned gesture features.
+
+    With Phi (K, d) the features of the K context steps and Y (K, 6) their
+    labels (label-scale units), the posterior over the map W (d, 6) has
+    precision Phi^T Phi + lambda I, so with A = (Phi^T Phi + lambda I)^-1
+
+        r(t) = phi(t)^T A Phi^T Y,     v(t) = 1 + phi(t)^T A phi(t).
+
+    a(t) = phi(t)^T A Phi^T (K) is the equivalent kernel: a signed attention
+    over the context steps, r = a . Y. v(t) grows when the live gesture is
+    unlike every context gesture; the reported std is scaled by sqrt(v).
+    A is computed once per context (a batched Cholesky solve, differentiable,
+    so phi is meta-learned through it); a step is then O(d^2).
+    """
+
+    def __init__(self, cfg: CchpConfig):
+        super().__init__()
+        self.proj = nn.Linear(cfg.gesture_size, cfg.phi_size)
+        self.raw = cfg.phi_raw
+        self.window = cfg.phi_window
+        self.window_proj = nn.Linear(cfg.phi_window * FEATURE_DIM, cfg.phi_window_size) if cfg.phi_window else None
+        self.dim = (cfg.phi_size + (FEATURE_DIM if cfg.phi_raw else 0) + 1
+                    + (cfg.phi_window_size if cfg.phi_window else 0))
+        self.log_lambda = nn.Parameter(torch.tensor(math.log(cfg.blr_lambda)))
+
+    @property
+    def lam(self) -> torch.Tensor:
+        return self.log_lambda.exp()
+
+    def features(self, g: torch.Tensor, x_n: torch.Tensor, window: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """phi from the gesture cell's state g (.., G), the normalised features x_n (.., 36) and,
+        with phi_window, their last frames `window` (.., phi_window * 36, oldest first)."""
+        parts = [self.proj(g)] + ([x_n] if self.raw else [])
+        if self.window_proj is not None:
+            parts.append(self.window_proj(window))
+        return torch.cat(parts + [torch.ones_like(g[..., :1])], -1)
+
+    def windows(self, x_n: torch.Tensor) -> Optional[torch.Tensor]:
+        """(N, T, 36) -> (N, T, phi_window * 36): each step's last frames, zeros before the sequence starts."""
+        if self.window_proj is None:
+            return None
+        padded = nn.functional.pad(x_n, (0, 0, self.window - 1, 0))
+        return torch.cat([padded[:, k : k + x_n.shape[1]] for k in range(self.window)], -1)
+
+    def fit(self, phi: torch.Tensor, y: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """phi (B, K, d), y (B, K, 6), mask (B, K) -> W (B, d, 6), A (B, d, d)."""
+        m = mask.unsqueeze(-1).to(phi.dtype)
+        phi = phi * m
+        gram = phi.transpose(1, 2) @ phi + self.lam * torch.eye(self.dim, dtype=phi.dtype, device=phi.device)
+        chol = torch.linalg.cholesky(gram)
+        A = torch.cholesky_inverse(chol)
+        W = torch.cholesky_solve(phi.transpose(1, 2) @ (y * m), chol)
+        return W, A
+
+    def read(self, phi_t: torch.Tensor, W: torch.Tensor, A: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """phi_t (B, d) -> r (B, 6) and v (B,) = 1 + phi^T A phi."""
+        r = (phi_t.unsqueeze(1) @ W).squeeze(1)
+        v = 1.0 + ((phi_t.unsqueeze(1) @ A).squeeze(1) * phi_t).sum(-1)
+        return r, v
+
+
 class OutputHeads(nn.Module):
     """f_y, one MLP per motion dimension: (r, h, z) -> mean and bounded std."""
 
@@ -221,6 +296,9 @@ class ContextEncoding:
     mask: torch.Tensor  # (B, K) bool
     z_mu: torch.Tensor  # (B, Dz)
     z_sigma: torch.Tensor  # (B, Dz)
+    # The Bayesian linear read ("bayes_linear"): W (B, d, 6) and A (B, d, d); keys then hold Phi (B, 1, K, d).
+    blr_W: Optional[torch.Tensor] = None
+    blr_A: Optional[torch.Tensor] = None
 
 
 class Cchp(nn.Module):
@@ -238,11 +316,16 @@ class Cchp(nn.Module):
             raise ValueError(f"attention_kernel must be 'dot' or 'distance', got {self.cfg.attention_kernel!r}")
         if self.cfg.key_source not in ("state", "gesture"):
             raise ValueError(f"key_source must be 'state' or 'gesture', got {self.cfg.key_source!r}")
+        if self.cfg.read not in ("attention", "bayes_linear"):
+            raise ValueError(f"read must be 'attention' or 'bayes_linear', got {self.cfg.read!r}")
+        if self.cfg.read == "bayes_linear" and (self.cfg.key_source != "gesture" or self.cfg.attention_heads != 1):
+            raise ValueError("read 'bayes_linear' needs key_source 'gesture' and one attention head")
         self.normalizer = Normalizer()
         self.cell = EncoderCell(self.cfg)
         self.latent = LatentEncoder(self.cfg)
         self.attention = ContextAttention(self.cfg)
         self.output = OutputHeads(self.cfg)
+        self.blr = BayesLinearRead(self.cfg) if self.cfg.read == "bayes_linear" else None
 
     # -- encoder ---------------------------------------------------------
     def encode_sequences(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -274,14 +357,24 @@ class Cchp(nn.Module):
             x_c = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
             h_c = self.encode_sequences(x_c, y_c)
         mask = batch.mask_c.reshape(b, p * tc)
-        keys = self.attention.project_keys(h_c.reshape(b, p * tc, -1))
         values = y_c.reshape(b, p * tc, MOTION_DIM)
+        blr_W = blr_A = None
+        if self.blr is not None:
+            x_pieces = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
+            win = self.blr.windows(x_pieces)  # per piece: each piece starts from zeros
+            x_n = x_pieces.reshape(b, p * tc, FEATURE_DIM)
+            phi = self.blr.features(h_c.reshape(b, p * tc, -1)[..., self.cfg.hidden_size:], x_n,
+                                    None if win is None else win.reshape(b, p * tc, -1))
+            blr_W, blr_A = self.blr.fit(phi, values, mask)
+            keys = phi.unsqueeze(1)
+        else:
+            keys = self.attention.project_keys(h_c.reshape(b, p * tc, -1))
         feats = self.latent.step_features(h_c, y_c).reshape(b, p * tc, -1)
         m = mask.unsqueeze(-1).to(feats.dtype)
         sums = (feats * m).sum(1)
         counts = m.sum(1)
         z_mu, z_sigma = self.latent.from_summary(sums / counts.clamp_min(1.0))
-        return ContextEncoding(keys, values, mask, z_mu, z_sigma), torch.cat([sums, counts], -1)
+        return ContextEncoding(keys, values, mask, z_mu, z_sigma, blr_W, blr_A), torch.cat([sums, counts], -1)
 
     def encode_context_and_target(self, batch: Batch) -> Tuple[torch.Tensor, torch.Tensor]:
         """Hidden states of the context pieces (B*P, Tc, H) and of the targets
@@ -338,12 +431,26 @@ class Cchp(nn.Module):
         c = x.new_zeros(b, self.cfg.state_size)
         y_prev = x.new_zeros(b, MOTION_DIM)
         means, stds, attns = [], [], []
+        win = self.blr.windows(x) if self.blr is not None else None
         for t in range(t_len):
             h, c = self.cell(fingers[:, t], y_prev, h, c)
-            r, weights = self.attention(h, ctx.keys, ctx.values, ctx.mask)
+            if self.blr is not None:
+                phi_t = self.blr.features(h[:, self.cfg.hidden_size:], x[:, t], None if win is None else win[:, t])
+                r, v = self.blr.read(phi_t, ctx.blr_W, ctx.blr_A)
+                r = r.unsqueeze(1)  # (B, 1, 6): one read
+                if keep_attention:  # the equivalent kernel a = phi^T A Phi^T, masked
+                    a = ((phi_t.unsqueeze(1) @ ctx.blr_A) @ ctx.keys[:, 0].transpose(1, 2)).squeeze(1)
+                    weights = (a * ctx.mask.to(a.dtype)).unsqueeze(1)
+                else:
+                    weights = r
+            else:
+                r, weights = self.attention(h, ctx.keys, ctx.values, ctx.mask)
+                v = None
             if readouts is not None:
                 readouts.append(r)
             mean, std = self.output(r, h, z)
+            if v is not None:  # the posterior's predictive spread: wider for a gesture unlike the context
+                std = std * v.sqrt().unsqueeze(-1)
             means.append(mean)
             stds.append(std)
             if keep_attention:

@@ -1,4 +1,4 @@
-"""The built-in operator: a simulated person who inspects the part with their own gestures.
+"""The built-in simulated person who inspects the part with their own gestures.
 
 `SimulatedPerson` is the `synthetic` gesture source. It watches the
 workpiece (with a perception delay and noise), decides what it wants next and
@@ -33,7 +33,7 @@ gesture_status, keypoints)
   intended_twist  (6)  the twist [vx vy vz wx wy wz] the person wants now, user
                        frame (m/s, rad/s; zero between gestures)
 
-`make_builtin_person(scenario, seed, user)` builds the operator for a user
+`make_builtin_person(scenario, seed, user)` builds the person for a user
 of the generated population (default: the first out-sample user) and returns
 that user's labelled clips as the policy's context. `KinematicWorkpiece` is a
 stand-in for the robot that follows a twist exactly, for tests and notebooks.
@@ -78,7 +78,7 @@ PHASES = ("lift", "present", "inspect", "done")
 
 @dc.dataclass
 class PersonConfig:
-    """The simulated person's habits. Pairs ``(lo, hi)`` are drawn once per operator."""
+    """The simulated person's habits. Pairs ``(lo, hi)`` are drawn once per person."""
 
     # Perception: the person sees the part late and not quite exactly.
     perception_delay_s: tuple[float, float] = (0.1, 0.25)
@@ -88,7 +88,7 @@ class PersonConfig:
     # Task
     lift_height_m: float = 0.18  # above the start, before anything sideways
     lift_tolerance_m: float = 0.025
-    clear_height_m: float = 0.12  # below this (above the start) the operator only lifts
+    clear_height_m: float = 0.12  # below this (above the start) the person only lifts
     # While lifting, a part seen sliding sideways faster than this makes the person drop the hand at once.
     lift_sideways_stop_m_s: float = 0.02
     presentation_xyz_W: tuple[float, float, float] = (0.25, 0.15, 0.50)  # world, in front of the inspector
@@ -256,7 +256,7 @@ class SimulatedPerson(KeypointGestureSource):
     def _calc_intended(self, context, output: BasicVector):
         output.SetFromVector(context.get_abstract_state(self._state).get_value().intended)
 
-    def operator_state(self, context) -> PersonState:
+    def person_state(self, context) -> PersonState:
         """The person's state (phase, faces seen, hand mode, ...), for tests and notebooks."""
         return context.get_abstract_state(self._state).get_value()
 
@@ -565,9 +565,9 @@ def population_user_ids(config: GeneratorConfig | None = None, n_users: int = DE
 
 def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
                           config: PersonConfig | None = None, population_seed: int = DEFAULT_SEED):
-    """The built-in operator and its context: (SimulatedPerson, [(features (T, 36), labels (T, 6)), ...]).
+    """The built-in simulated person and its context: (SimulatedPerson, [(features (T, 36), labels (T, 6)), ...]).
 
-    The operator is a user of the population `python -m rtcohand_drake.data.generate`
+    The person is a user of the population `python -m rtcohand_drake.data.generate`
     writes by default (15 users, seed 0): `user` names one by id ("u00" ..
     "u14"); by default the first out-sample user, whom no policy was trained on.
     The context is that user's 72 labelled clips at the policy rate, generated
@@ -594,8 +594,8 @@ def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
         pc = to_policy_clip(clip, rate)
         pieces.append((pc.features, pc.labels))
     X_WU = scenario.cell.user_frame.to_rigid_transform()
-    operator = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed)
-    return operator, pieces
+    person = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed)
+    return person, pieces
 
 
 def from_options(options, scenario):

@@ -1,0 +1,120 @@
+"""The Bayesian linear context read (CchpConfig.read = "bayes_linear"), exported, against numpy."""
+
+import numpy as np
+import pytest
+import torch
+
+from rtcohand_drake.learning.batching import collate, collate_context
+from rtcohand_drake.learning.export import script_policy
+from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
+
+
+def _clip(rng, n, scale=0.3):
+    return rng.normal(size=(n, 36)).astype(np.float32) * scale, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
+
+
+def _model(window=10):
+    torch.manual_seed(3)
+    model = Cchp(CchpConfig(key_source="gesture", attention_kernel="distance", read_skip=True,
+                            read="bayes_linear", phi_window=window)).eval()
+    model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
+    return model
+
+
+def _play(policy, x, keys, values, z):
+    h = torch.zeros(policy.hidden_size)
+    c = torch.zeros(policy.hidden_size)
+    y = torch.zeros(6)
+    out = []
+    for t in range(len(x)):
+        mean, std, h, c, att = policy.step(torch.from_numpy(x[t]), y, h, c, keys, values, z)
+        out.append((mean, std, att))
+        y = mean
+    return out
+
+
+def _target_phi(model, x, means):
+    """phi(t) of the target steps, with the model's own means fed back (as the step does)."""
+    x_n = model.normalizer_x(torch.from_numpy(x)).unsqueeze(0)
+    win = model.blr.windows(x_n)
+    fingers = model.cell.fingers(x_n)
+    h = torch.zeros(1, model.cfg.state_size)
+    c = torch.zeros(1, model.cfg.state_size)
+    y_prev = torch.zeros(1, 6)
+    phis = []
+    for t in range(len(x)):
+        h, c = model.cell(fingers[:, t], y_prev, h, c)
+        phis.append(model.blr.features(h[:, model.cfg.hidden_size:], x_n[:, t], win[:, t])[0])
+        y_prev = model.normalizer_y(means[t].view(1, 6))
+    return torch.stack(phis).double().numpy()
+
+
+def test_read_is_the_closed_form_posterior_mean():
+    """r(t) = phi(t)^T (Phi^T Phi + lambda I)^-1 Phi^T Y, solved here in float64 numpy."""
+    model = _model()
+    rng = np.random.default_rng(0)
+    context = [_clip(rng, 40), _clip(rng, 31), _clip(rng, 17)]
+    target = _clip(rng, 25)[0]
+    policy = script_policy(model)
+    keys, values, z_mu, _ = policy.encode_context(*collate_context(context))
+    steps = _play(policy, target, keys, values, z_mu)
+    d = policy.phi_dim
+    Phi = keys[:, d:].double().numpy()  # the context features
+    Y = values.double().numpy() / model.normalizer.label_scale.double().numpy()
+    lam = float(model.blr.lam.detach())
+    gram = Phi.T @ Phi + lam * np.eye(d)
+    np.testing.assert_allclose(keys[:, :d].double().numpy(), Phi @ np.linalg.inv(gram), atol=1e-5)
+    W = np.linalg.solve(gram, Phi.T @ Y)
+    phi_t = _target_phi(model, target, [m for m, _, _ in steps])
+    r_numpy = phi_t @ W
+    r_policy = np.stack([(att.double() @ values.double()).numpy() for _, _, att in steps])
+    r_policy = r_policy / model.normalizer.label_scale.double().numpy()
+    np.testing.assert_allclose(r_policy, r_numpy, atol=1e-5 * max(1.0, np.abs(r_numpy).max()))
+
+
+def test_std_grows_for_a_gesture_unlike_the_context():
+    model = _model()
+    rng = np.random.default_rng(1)
+    context = [_clip(rng, 40, 0.1) for _ in range(4)]
+    policy = script_policy(model)
+    keys, values, z_mu, _ = policy.encode_context(*collate_context(context))
+    near = _play(policy, _clip(rng, 10, 0.1)[0], keys, values, z_mu)
+    far = _play(policy, _clip(rng, 10, 3.0)[0], keys, values, z_mu)
+    std_near = torch.stack([s for _, s, _ in near]).mean()
+    std_far = torch.stack([s for _, s, _ in far]).mean()
+    assert std_far > 1.5 * std_near
+
+
+def test_mirror_image_people_get_opposite_reads_from_the_same_gesture():
+    """Person B makes the same hand motions as person A for the opposite twists: the context decides."""
+    model = _model()
+    rng = np.random.default_rng(2)
+    person_a = [_clip(rng, 40) for _ in range(5)]
+    person_b = [(x, -y) for x, y in person_a]
+    gesture = _clip(rng, 20)[0]
+    batch_a = collate([(gesture, np.zeros((20, 6), np.float32))], [person_a])
+    batch_b = collate([(gesture, np.zeros((20, 6), np.float32))], [person_b])
+    reads = []
+    for batch in (batch_a, batch_b):
+        ctx, _ = model.encode_context(batch)
+        h = torch.zeros(1, model.cfg.state_size)
+        c = torch.zeros(1, model.cfg.state_size)
+        x_n = model.normalizer_x(batch.x)
+        fingers = model.cell.fingers(x_n)
+        win = model.blr.windows(x_n)
+        out = []
+        for t in range(20):
+            h, c = model.cell(fingers[:, t], torch.zeros(1, 6), h, c)
+            phi = model.blr.features(h[:, model.cfg.hidden_size:], x_n[:, t], win[:, t])
+            r, _ = model.blr.read(phi, ctx.blr_W, ctx.blr_A)
+            out.append(r)
+        reads.append(torch.cat(out))
+    assert reads[0].abs().max() > 1e-3
+    torch.testing.assert_close(reads[0], -reads[1], atol=1e-5, rtol=1e-4)
+
+
+def test_bayes_linear_needs_the_gesture_cell():
+    with pytest.raises(ValueError):
+        Cchp(CchpConfig(read="bayes_linear"))
+    with pytest.raises(ValueError):
+        Cchp(CchpConfig(read="bayes_linear", key_source="gesture", attention_heads=6))
