@@ -30,7 +30,7 @@ from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
 from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.stations.sim import make_sim_station
-from rtcohand_drake.interfaces import FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, READ_VARIANCE, SPEED_SCALE, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
 
 
 @dc.dataclass
@@ -82,6 +82,8 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         connect(source.GetOutputPort(GESTURE_FEATURES), policy.GetInputPort(GESTURE_FEATURES))
         connect(source.GetOutputPort(GESTURE_FEATURES), supervisor.GetInputPort(GESTURE_FEATURES))
         connect(supervisor.GetOutputPort(RESUME_COUNT), policy.GetInputPort(RESUME_COUNT))
+        if policy.HasOutputPort(READ_VARIANCE):
+            connect(policy.GetOutputPort(READ_VARIANCE), supervisor.GetInputPort(READ_VARIANCE))
         if policy.HasInputPort(INTENDED_TWIST) and source.HasOutputPort(INTENDED_TWIST):
             # A reference policy (analysis.reference_policies.IntentPolicy) reads what the simulated person means.
             connect(source.GetOutputPort(INTENDED_TWIST), policy.GetInputPort(INTENDED_TWIST))
@@ -102,12 +104,15 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         "robot_workpiece_pose": log(station.GetOutputPort(WORKPIECE_POSE), robot_period),
         "command_twist": log(supervisor.GetOutputPort(TWIST_COMMAND), scenario.safety.period_s),
         "safety_status": log(supervisor.GetOutputPort(SAFETY_STATUS), scenario.safety.period_s),
+        "speed_scale": log(supervisor.GetOutputPort(SPEED_SCALE), scenario.safety.period_s),
         "follow_status": log(controller.GetOutputPort(FOLLOW_STATUS), scenario.control_period_s),
     }
     if policy is not None:
         policy_period = 1.0 / scenario.policy.rate_hz
         loggers["policy_mean"] = log(policy.GetOutputPort(POLICY_MEAN), policy_period)
         loggers["policy_std"] = log(policy.GetOutputPort(POLICY_STD), policy_period)
+        if policy.HasOutputPort(READ_VARIANCE):
+            loggers["read_variance"] = log(policy.GetOutputPort(READ_VARIANCE), policy_period)
     visualizer = overlay = None
     if meshcat is not None:
         from rtcohand_drake.systems.overlay import RunOverlay
@@ -157,9 +162,14 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
     _, log.robot_v = _log_arrays(run.loggers["robot_v"], root_context)
     _, log.robot_workpiece_pose = _log_arrays(run.loggers["robot_workpiece_pose"], root_context)
     log.command_time, log.command_twist = _log_arrays(run.loggers["command_twist"], root_context)
+    _, log.command_speed_scale = _log_arrays(run.loggers["speed_scale"], root_context)
+    log.command_speed_scale = log.command_speed_scale[:, 0]
     if "policy_mean" in run.loggers:
         log.policy_time, log.policy_mean = _log_arrays(run.loggers["policy_mean"], root_context)
         _, log.policy_std = _log_arrays(run.loggers["policy_std"], root_context)
+        if "read_variance" in run.loggers:
+            _, variance = _log_arrays(run.loggers["read_variance"], root_context)
+            log.policy_read_variance = variance[:, 0]
 
     t, status = _log_arrays(run.loggers["safety_status"], root_context)
     modes = status[:, 0].round().astype(int)

@@ -50,6 +50,7 @@ RESUME_COUNT = "resume_count"  # (1) in: resumes so far (a change resamples z)
 POLICY_MEAN = "policy_mean"  # (6) out: the predicted twist
 POLICY_STD = "policy_std"  # (6) out
 ATTENTION = "attention"  # (K) out: attention over the context steps
+READ_VARIANCE = "read_variance"  # (1) out: the read's predictive variance factor v >= 1 (1: like the context)
 
 # --- command filter, operator panel, supervisor, differential IK -----------------
 
@@ -59,4 +60,5 @@ OPERATOR_DIM = 2
 TWIST_COMMAND = "twist_command"  # (6) the supervisor's command, to the differential IK
 SAFETY_STATUS = "safety_status"  # (3) [mode, resume_count, interventions]
 SAFETY_STATUS_DIM = 3
+SPEED_SCALE = "speed_scale"  # (1) the supervisor's confidence scale on the request, in [floor, 1]
 FOLLOW_STATUS = "follow_status"  # (2) the differential IK's follow status

@@ -6,8 +6,8 @@ rename), so a crash never leaves a half-written log under the requested name.
 `read_run_log` reads one back (tests, notebooks, plots).
 
 Layout (docs/interfaces.md (the run log); extensions are marked +):
-  /policy/time (P,) /policy/mean (P,6) /policy/std (P,6)
-  /command/time (M,) /command/twist (M,6)
+  /policy/time (P,) /policy/mean (P,6) /policy/std (P,6) + /policy/read_variance (P,)
+  /command/time (M,) /command/twist (M,6) + /command/speed_scale (M,)
   /robot/time (K,) /robot/q (K,7) /robot/v (K,7) /robot/workpiece_pose (K,7)
   /events  compound (time f8, kind str, detail str)
   / attrs: scenario, model, gesture_source, completed, faces_inspected,
@@ -48,8 +48,10 @@ class RunLog:
     policy_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     policy_mean: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
     policy_std: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
+    policy_read_variance: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     command_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     command_twist: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
+    command_speed_scale: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     robot_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     robot_q: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
     robot_v: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
@@ -63,7 +65,8 @@ class RunLog:
 
 _DATASETS = {
     "policy/time": "policy_time", "policy/mean": "policy_mean", "policy/std": "policy_std",
-    "command/time": "command_time", "command/twist": "command_twist",
+    "policy/read_variance": "policy_read_variance",
+    "command/time": "command_time", "command/twist": "command_twist", "command/speed_scale": "command_speed_scale",
     "robot/time": "robot_time", "robot/q": "robot_q", "robot/v": "robot_v",
     "robot/workpiece_pose": "robot_workpiece_pose",
 }

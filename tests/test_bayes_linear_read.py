@@ -83,6 +83,15 @@ def test_read_is_the_closed_form_posterior_mean():
     flat = _play(policy, target, no_var, values, z_mu)
     v_policy = np.stack([((s / s0) ** 2).double().numpy() for (_, s, _), (_, s0, _) in zip(steps, flat)])
     np.testing.assert_allclose(v_policy, np.repeat(v_numpy[:, None], 6, 1), rtol=1e-4)
+    # ... and step_with_variance reports that same v beside the step's own outputs.
+    H = policy.hidden_size
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    for t, (mean, std, _) in enumerate(steps):
+        y2, std2, h, c, _, v = policy.step_with_variance(torch.from_numpy(target[t]), y, h, c, keys, values, z_mu)
+        torch.testing.assert_close(y2, mean)
+        torch.testing.assert_close(std2, std)
+        assert float(v) == pytest.approx(v_numpy[t], rel=1e-4)
+        y = y2
 
 
 def test_std_grows_for_a_gesture_unlike_the_context():

@@ -8,7 +8,7 @@ from pydrake.systems.analysis import Simulator
 from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
 from rtcohand_drake.systems.safety.supervisor import Intervention, Mode, SafetySupervisor
 from rtcohand_drake.scenario import Box, CommandFilter, Safety
-from rtcohand_drake.interfaces import GESTURE_STATUS, OPERATOR, POLICY_MEAN, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
+from rtcohand_drake.interfaces import GESTURE_STATUS, OPERATOR, POLICY_MEAN, READ_VARIANCE, RESUME_COUNT, SPEED_SCALE, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
 
 R_WU = np.diag([-1.0, -1.0, 1.0])  # the inspection cell's user frame: world turned 180 deg about z
 EYE = np.array([0.25, 1.0, 0.86])
@@ -94,6 +94,27 @@ def test_passes_a_valid_request_and_applies_sensitivity():
     out = _advance(s, ctx, sim, 1.0, request=[0.05, 0, 0, 0, 0, 0.2], sensitivity=2.0)
     assert np.allclose(out[-1][0], [0.1, 0, 0, 0, 0, 0.4])
     assert out[-1][1][0] == Mode.RUNNING
+
+
+@pytest.mark.parametrize("variance, scale", [(1.02, 1.0), (1.1, 1.0), (1.35, 0.65), (1.6, 0.3), (9.0, 0.3),
+                                             (np.inf, 0.3), (np.nan, 0.3)])
+def test_confidence_scales_the_request_by_the_read_variance(variance, scale):
+    """Full speed for a gesture like the context (v <= 1.1), down to the 0.3 floor at v >= 1.6."""
+    s, ctx, sim = _supervisor()
+    s.GetInputPort(READ_VARIANCE).FixValue(ctx, [variance])
+    out = _advance(s, ctx, sim, 1.0, request=[0.05, 0, 0, 0, 0, 0.2])
+    assert np.allclose(out[-1][0], scale * np.array([0.05, 0, 0, 0, 0, 0.2]))
+    assert s.GetOutputPort(SPEED_SCALE).Eval(ctx)[0] == pytest.approx(scale)
+    assert bool(int(out[-1][1][2]) & Intervention.LOW_CONFIDENCE) == (scale < 1.0)
+
+
+def test_confidence_scaling_off_and_unconnected_leave_the_request_alone():
+    s, ctx, sim = _supervisor(Safety(confidence_scaling=False))
+    s.GetInputPort(READ_VARIANCE).FixValue(ctx, [5.0])
+    assert np.allclose(_advance(s, ctx, sim, 1.0, request=[0.05, 0, 0, 0, 0, 0])[-1][0][0], 0.05)
+    s, ctx, sim = _supervisor()
+    assert np.allclose(_advance(s, ctx, sim, 1.0, request=[0.05, 0, 0, 0, 0, 0])[-1][0][0], 0.05)
+    assert s.GetOutputPort(SPEED_SCALE).Eval(ctx)[0] == 1.0
 
 
 def test_sensitivity_is_clipped_to_its_range():

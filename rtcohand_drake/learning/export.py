@@ -8,6 +8,8 @@
         -> (keys [K, D], values [K, 6], z_mu [Dz], z_sigma [Dz])
     step(x_t [36], y_prev [6], h [H], c [H], keys [K, D], values [K, 6], z [Dz])
         -> (mean [6], std [6], h [H], c [H], attention [K] (one head) or [heads, K])
+    step_with_variance(the same) -> (the same, v [1]): v = 1 + phi^T A phi, the Bayesian
+        linear read's predictive variance factor (1 for a softmax-attention read)
 
 and the integer attributes feature_dim (36), hidden_size (H: the size of the
 recurrent state h and c, which includes the gesture cell's state when the
@@ -197,6 +199,16 @@ class CchpPolicy(nn.Module):
     def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
              keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        mean, std, h2, c2, attention, _ = self.step_with_variance(x_t, y_prev, h, c, keys, values, z)
+        return mean, std, h2, c2, attention
+
+    @torch.jit.export
+    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                                      torch.Tensor]:
+        """`step`, plus the read's predictive variance factor v = 1 + phi^T A phi ([1]; 1 without the
+        Bayesian linear read): how unlike every context gesture this one is."""
         x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
         finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
         h_in = h.view(1, -1)
@@ -237,7 +249,7 @@ class CchpPolicy(nn.Module):
         if self.buffer_size > 0:  # carry the newest (phi_window - 1) frames to the next step
             h2 = torch.cat([h2, window[:, self.feature_dim:]], 1)
             c2 = torch.cat([c2, torch.zeros(1, self.buffer_size)], 1)
-        return mean, std, h2.view(-1), c2.view(-1), attention
+        return mean, std, h2.view(-1), c2.view(-1), attention, variance_factor
 
 
 def script_policy(model: Cchp) -> torch.jit.ScriptModule:

@@ -30,6 +30,9 @@ Output ports
   policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
   attention        (K)  attention weights over the K context steps (mean over heads)
+  read_variance    (1)  the read's predictive variance factor v = 1 + phi^T A phi (>= 1): near 1 for a
+                        gesture like the context's, larger for one unlike all of them (the
+                        supervisor slows down for it); 1 for a model without the Bayesian linear read
 """
 
 # No `from __future__ import annotations`: Drake's yaml_load_typed reads the real field types.
@@ -41,7 +44,7 @@ from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.learning.policy_file import load_policy
-from rtcohand_drake.interfaces import ATTENTION, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD, RESUME_COUNT
+from rtcohand_drake.interfaces import ATTENTION, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD, READ_VARIANCE, RESUME_COUNT
 
 
 @dc.dataclass
@@ -84,6 +87,7 @@ class CchpPolicy(LeafSystem):
             self.module, self.model_path = load_policy(model_path), str(model_path)
         else:  # an already loaded policy module
             self.module, self.model_path = model_path, getattr(model_path, "source_path", "")
+        self._has_variance = hasattr(self.module, "step_with_variance")
         x_c, y_c, mask = pack_context(context_pieces)
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(
@@ -110,11 +114,13 @@ class CchpPolicy(LeafSystem):
         self._z = self.DeclareDiscreteState(self.sample_z(0))
         self._resumes = self.DeclareDiscreteState(np.zeros(1))
         self._attn = self.DeclareDiscreteState(np.zeros(self.context_steps))
+        self._variance = self.DeclareDiscreteState(np.ones(1))
         self._out = self.DeclareDiscreteState(6)  # the twist output (module docstring)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(POLICY_MEAN, self._out)
         self.DeclareStateOutputPort(POLICY_STD, self._std)
         self.DeclareStateOutputPort(ATTENTION, self._attn)
+        self.DeclareStateOutputPort(READ_VARIANCE, self._variance)
 
     def sample_z(self, resume_count: int) -> np.ndarray:
         """z ~ q(z|C), deterministic in (seed, resume_count)."""
@@ -122,13 +128,17 @@ class CchpPolicy(LeafSystem):
         return self.z_mu + self.z_sigma * rng.standard_normal(self._Dz)
 
     def step(self, x, y_prev, h, c, z):
-        """One policy step in numpy: returns (mean, std, h, c, attention), all as the module gives them."""
+        """One policy step in numpy: (mean, std, h, c, attention, v), all as the module gives them."""
         torch = self._torch
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
+        args = (f32(x), f32(y_prev), f32(h), f32(c), self._keys, self._values, f32(z))
         with torch.no_grad():
-            mean, std, h2, c2, attn = self.module.step(f32(x), f32(y_prev), f32(h), f32(c),
-                                                       self._keys, self._values, f32(z))
-        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn.numpy()
+            if self._has_variance:
+                mean, std, h2, c2, attn, v = self.module.step_with_variance(*args)
+                v = float(v[0])
+            else:  # a policy file without the method: no variance to report
+                (mean, std, h2, c2, attn), v = self.module.step(*args), 1.0
+        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn.numpy(), v
 
     def _update(self, context, discrete_state):
         get = lambda i: context.get_discrete_state(i).get_value()
@@ -142,15 +152,17 @@ class CchpPolicy(LeafSystem):
                 discrete_state.set_value(self._z, z)
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
-        mean, std, h, c, attn = self.step(x, y_prev, h, c, z)
+        mean, std, h, c, attn, v = self.step(x, y_prev, h, c, z)
         out = blended_output(mean, attn, self._values_np, self.correction_weight)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
+            v = np.inf
             h, c = np.zeros_like(h), np.zeros_like(c)
         discrete_state.set_value(self._h, h)
         discrete_state.set_value(self._c, c)
         discrete_state.set_value(self._y, mean)
         discrete_state.set_value(self._out, out)
         discrete_state.set_value(self._std, std)
+        discrete_state.set_value(self._variance, [v if np.isfinite(v) else np.inf])
         discrete_state.set_value(self._attn, attn.mean(axis=0) if attn.ndim == 2 else attn)

@@ -24,6 +24,16 @@ class Safety:
     # So does a hand-part velocity above this (m/s or rad/s): no hand moves that fast, so it
     # is a tracking error (a fast hand moves at about 2-5 m/s, a wrist turns at up to ~15 rad/s).
     max_plausible_feature: float = 25.0
+    # Confidence scaling: the request is scaled by the policy's confidence, from the read's
+    # predictive variance factor v = 1 + phi^T A phi (port read_variance): full speed up to
+    # v = confidence_full_variance, falling linearly to confidence_floor at
+    # confidence_floor_variance and beyond. Chosen on the development population (seed 0):
+    # a person's own held-out gestures give v = 1.01-1.09 (10th-99th percentile), another
+    # person's gestures read with this person's clips 1.09 (median), 1.29 (90th), 1.78 (99th).
+    confidence_scaling: bool = True
+    confidence_full_variance: float = 1.1
+    confidence_floor_variance: float = 1.6
+    confidence_floor: float = 0.3
     # Minimum distance from the workpiece centre to the inspector's eye point (m).
     min_inspector_distance_m: float = 0.55
     # Look-ahead for the workspace and inspector-zone checks (s).

@@ -40,6 +40,7 @@ class Intervention(enum.IntFlag):
     PAUSED = 16
     NON_FINITE = 32
     MOLD_EXIT = 64
+    LOW_CONFIDENCE = 128
 
 
 @dc.dataclass(frozen=True)
@@ -146,7 +147,20 @@ RULES = (
     Rule(Intervention.WORKSPACE, "workspace", workspace_box),
     Rule(Intervention.INSPECTOR_ZONE, "inspector_zone", inspector_zone),
     Rule(Intervention.NON_FINITE, "fault"),
+    Rule(Intervention.LOW_CONFIDENCE, "low_confidence"),
 )
+
+
+def confidence_scale(variance: float, config: Safety) -> float:
+    """The speed scale for the read's variance factor v: 1 up to the full-speed variance, then down
+    linearly to the floor at the floor variance; the floor for a non-finite v; 1 when switched off."""
+    if not config.confidence_scaling:
+        return 1.0
+    if not np.isfinite(variance):
+        return float(config.confidence_floor)
+    span = max(config.confidence_floor_variance - config.confidence_full_variance, 1e-9)
+    share = float(np.clip((variance - config.confidence_full_variance) / span, 0.0, 1.0))
+    return 1.0 - (1.0 - config.confidence_floor) * share
 
 
 def limit_to_zones(twist_U: np.ndarray, p_W: np.ndarray, zones: Zones) -> tuple[np.ndarray, Intervention]:

@@ -10,8 +10,10 @@ Every `period_s` it turns the filtered twist request into the twist command:
 2. pause: the operator's pause brings the workpiece to rest over
    `pause_ramp_s` and holds it; resume counts up `resume_count` (the policy
    resamples its latent z and the filter forgets its history on a change);
-3. sensitivity: the request is scaled by the operator's factor, clipped to
-   [sensitivity_min, sensitivity_max];
+3. sensitivity and confidence: the request is scaled by the operator's factor,
+   clipped to [sensitivity_min, sensitivity_max], and by the policy's confidence
+   (`rules.confidence_scale` of the read's variance factor: 1 for a gesture like
+   the person's context, down to `confidence_floor` for one unlike all of it);
 4. speed limits: |v| <= max_linear_speed_m_s and |w| <= max_angular_speed_rad_s
    (direction kept);
 5. workspace box and inspector zone: the velocity component that would carry
@@ -27,14 +29,17 @@ Input ports
   gesture_features (36) optional: the features the policy reads, checked for sanity
   workpiece.pose  (7) [x y z qw qx qy qz], world
   operator        (2) [pause (0/1), sensitivity factor]
+  read_variance   (1) optional: the policy's read variance factor v (unconnected: full confidence)
 Output ports
   twist_command   (6) user frame, to the differential IK
   safety_status   (3) [mode, resume_count, interventions]: mode 0 running,
                   1 paused, 2 watchdog; interventions is a bit set (1 speed
                   clamp, 2 workspace, 4 inspector zone, 8 watchdog, 16 paused,
-                  32 non-finite request, 64 mold exit corridor) of what acted at the last
+                  32 non-finite request, 64 mold exit corridor, 128 slowed for low
+                  confidence) of what acted at the last
                   update (the table `rules.RULES` names each).
   resume_count    (1) number of resumes so far
+  speed_scale     (1) the confidence scale applied at the last update, in [confidence_floor, 1]
 """
 
 from __future__ import annotations
@@ -45,8 +50,8 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from rtcohand_drake.systems.diff_ik import clamp_twist
 from rtcohand_drake.cell.layout import Box
 from rtcohand_drake.systems.safety.config import Safety
-from rtcohand_drake.systems.safety.rules import Intervention, Mode, Zones, limit_to_zones, plausible_features
-from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, OPERATOR, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
+from rtcohand_drake.systems.safety.rules import Intervention, Mode, Zones, confidence_scale, limit_to_zones, plausible_features
+from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, OPERATOR, READ_VARIANCE, RESUME_COUNT, SAFETY_STATUS, SPEED_SCALE, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
 
 
 class SafetySupervisor(LeafSystem):
@@ -69,13 +74,16 @@ class SafetySupervisor(LeafSystem):
         self._features = self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
         self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
         self._operator = self.DeclareVectorInputPort(OPERATOR, 2)
+        self._variance = self.DeclareVectorInputPort(READ_VARIANCE, 1)
         self._command = self.DeclareDiscreteState(np.zeros(6))
         # [mode, resume_count, interventions, paused_input_last, ramp_from_norm_v, ramp_from_norm_w]
         self._state = self.DeclareDiscreteState(np.zeros(6))
+        self._scale = self.DeclareDiscreteState(np.ones(1))
         self.DeclarePeriodicDiscreteUpdateEvent(self._dt, 0.0, self._update)
         self.DeclareStateOutputPort(TWIST_COMMAND, self._command)
         self.DeclareVectorOutputPort(SAFETY_STATUS, 3, self._calc_status, prerequisites_of_calc={self.xd_ticket()})
         self.DeclareVectorOutputPort(RESUME_COUNT, 1, self._calc_resume, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareStateOutputPort(SPEED_SCALE, self._scale)
 
     def limit_to_zones(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:
         """The zone rules of `rules.RULES` (mold corridor, workspace box, inspector zone) on a command."""
@@ -107,6 +115,11 @@ class SafetySupervisor(LeafSystem):
             stale = True
             acted |= Intervention.NON_FINITE
 
+        confidence = 1.0
+        if self._variance.HasValue(context):
+            confidence = confidence_scale(float(self._variance.Eval(context)[0]), cfg)
+            if confidence < 1.0:
+                acted |= Intervention.LOW_CONFIDENCE
         if paused:
             new_mode, ramp_s = Mode.PAUSED, cfg.pause_ramp_s
             acted |= Intervention.PAUSED
@@ -123,7 +136,7 @@ class SafetySupervisor(LeafSystem):
         else:
             s = float(np.clip(sensitivity if np.isfinite(sensitivity) else cfg.sensitivity_default,
                               cfg.sensitivity_min, cfg.sensitivity_max))
-            target = s * request
+            target = s * confidence * request
             clamped = clamp_twist(target, cfg.max_linear_speed_m_s, cfg.max_angular_speed_rad_s)
             if not np.allclose(clamped, target):
                 acted |= Intervention.SPEED_CLAMP
@@ -139,6 +152,7 @@ class SafetySupervisor(LeafSystem):
             acted |= Intervention.NON_FINITE
         command = clamp_twist(command, cfg.max_linear_speed_m_s, cfg.max_angular_speed_rad_s)
         discrete_state.set_value(self._command, command)
+        discrete_state.set_value(self._scale, [confidence])
         discrete_state.set_value(self._state, np.array(
             [float(new_mode), resumes, float(int(acted)), 1.0 if paused else 0.0, ramp_v, ramp_w]))
 
