@@ -26,6 +26,7 @@ from rtcohand_drake.run_log import RunLog
 from rtcohand_drake.systems.safety import rules
 from rtcohand_drake.systems.safety.rules import Mode
 from rtcohand_drake.systems.safety.supervisor import SafetySupervisor
+from rtcohand_drake.systems.inspection_monitor import InspectionMonitor
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
 from rtcohand_drake.cell.plant import eye_position
@@ -47,6 +48,7 @@ class RunDiagram:
     visualizer: MeshcatVisualizer | None = None
     overlay: LeafSystem | None = None
     gesture_source: str = "scripted"
+    monitor: InspectionMonitor | None = None
 
 
 def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, policy: LeafSystem | None = None,
@@ -97,6 +99,8 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     connect(controller.GetOutputPort(VELOCITY_COMMAND), station.GetInputPort(VELOCITY_COMMAND))
 
     robot_period = 1.0 / scenario.log_rate_hz
+    monitor = builder.AddNamedSystem("inspection", InspectionMonitor(eye_position(scenario.cell), robot_period))
+    connect(station.GetOutputPort(WORKPIECE_POSE), monitor.GetInputPort(WORKPIECE_POSE))
     log = lambda port, period: LogVectorOutput(port, builder, period)
     loggers = {
         "robot_q": log(station.GetOutputPort(POSITION_MEASURED), robot_period),
@@ -130,7 +134,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     diagram.set_name("rtcohand_run")
     name = gesture_source or ("scripted" if policy is None else type(source).__name__)
     return RunDiagram(diagram, station, controller, supervisor, source, operator, loggers, policy,
-                      command_filter, visualizer, overlay, name)
+                      command_filter, visualizer, overlay, name, monitor)
 
 
 def _nan_keypoints(builder):

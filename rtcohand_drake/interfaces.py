@@ -62,3 +62,4 @@ SAFETY_STATUS = "safety_status"  # (3) [mode, resume_count, interventions]
 SAFETY_STATUS_DIM = 3
 SPEED_SCALE = "speed_scale"  # (1) the supervisor's confidence scale on the request, in [floor, 1]
 FOLLOW_STATUS = "follow_status"  # (2) the differential IK's follow status
+FACES_INSPECTED = "faces_inspected"  # (6) 1 for each workpiece face that has counted as seen

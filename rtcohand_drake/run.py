@@ -1,7 +1,7 @@
 """`python -m rtcohand_drake.run`: build the diagram for a scenario, simulate it, log it.
 
     python -m rtcohand_drake.run --scenario inspection        # a built-in name, or a path to a scenario YAML file
-        [--duration S] [--realtime-rate R] [--no-meshcat] [--seed N]
+        [--duration S] [--realtime-rate R] [--no-meshcat | --no-wait] [--seed N]
         [--gesture-source synthetic|replay|camera|scripted]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
         [--context-file PATH.h5 [--context-user USER]] [--user ID [--population-seed N]]
@@ -9,7 +9,11 @@
         [--hardware --robot-ip IP [--dry-run]]                  # the real arm (kortex_station)
 
 Prints the Meshcat URL (unless --no-meshcat), then a summary: faces
-inspected, completion time, peak workpiece speeds and safety events. Bad input
+inspected, completion time, peak workpiece speeds and safety events. Without
+--duration the run ends `done_hold_s` (3 s) after all six faces are inspected,
+or at the scenario's `duration_s` (180 s), or when a replayed stream ends.
+With Meshcat the page then keeps serving, replaying the recorded run, until
+Ctrl-C (--no-wait: exit at once). Bad input
 exits with status 2 and one line on stderr naming the file and the problem.
 """
 
@@ -41,6 +45,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime-rate", type=float, default=None,
                    help="target real-time rate; 0 = as fast as possible (default 1 with Meshcat, 0 without)")
     p.add_argument("--no-meshcat", action="store_true", help="run headless")
+    p.add_argument("--no-wait", action="store_true",
+                   help="with Meshcat: exit at the end of the run instead of serving the page until Ctrl-C")
     p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated person")
     from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES
 
@@ -160,12 +166,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             station.close()
         raise
     duration = args.duration if args.duration is not None else (end_time or scenario.duration_s)
+    # With no --duration and no stream end, the run ends a short hold after the task is done.
+    stop_when_done = args.duration is None and end_time is None and scenario.stop_when_done
     rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if meshcat or station is not None else 0.0)
 
     simulator = Simulator(run.diagram)
     simulator.set_target_realtime_rate(rate)
     if run.visualizer is not None:
         run.visualizer.StartRecording(set_transforms_while_recording=True)
+    if stop_when_done:
+        simulator.set_monitor(_until_done(run, scenario.done_hold_s))
     simulator.Initialize()
     wall_start = time.perf_counter()
     interrupted = False
@@ -227,7 +237,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"run log: {args.log}")
     if html is not None and run.visualizer is not None:
         print(f"animation: {html}")
+    if meshcat is not None and not args.no_wait and not interrupted:
+        print(f"Meshcat keeps serving at {meshcat.web_url()}: the page replays the recorded run "
+              "(the animation controls). Ctrl-C to quit.", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
     return 130 if interrupted else 0
+
+
+def _until_done(run, hold_s: float):
+    """A simulator monitor that ends the run `hold_s` after the last face counted."""
+    from pydrake.systems.framework import EventStatus
+
+    monitor = run.monitor
+
+    def check(root):
+        done_at = monitor.inspected_at(monitor.GetMyContextFromRoot(root))
+        if np.all(np.isfinite(done_at)) and root.get_time() >= done_at.max() + hold_s - 1e-9:
+            return EventStatus.ReachedTermination(monitor, "all six faces inspected")
+        return EventStatus.DidNothing()
+
+    return check
 
 
 def entry_point() -> None:

@@ -45,7 +45,11 @@ class Scenario:
     control_period_s: float = 0.02
     # Rate at which the run log samples the robot (Hz); the run log needs >= 50 (docs/interfaces.md).
     log_rate_hz: float = 50.0
-    duration_s: float = 60.0
+    # The longest a run lasts when the command gives no --duration (s, simulated) ...
+    duration_s: float = 180.0
+    # ... which ends it this long after all six faces have been inspected, when stop_when_done.
+    stop_when_done: bool = True
+    done_hold_s: float = 3.0
     cell: Cell = dc.field(default_factory=Cell)
     robot: Robot = dc.field(default_factory=Robot)
     diff_ik: DiffIk = dc.field(default_factory=DiffIk)
@@ -123,6 +127,7 @@ def _check_values(s: Scenario, source: str) -> None:
     need(s.control_period_s >= s.plant_time_step_s, "control_period_s must be >= plant_time_step_s")
     need(s.log_rate_hz >= 50, "log_rate_hz must be >= 50 (the run log samples the robot at >= 50 Hz)")
     need(s.duration_s > 0, "duration_s must be > 0")
+    need(s.done_hold_s >= 0, "done_hold_s must be >= 0")
     need(0 < s.diff_ik.joint_velocity_fraction <= 1, "diff_ik.joint_velocity_fraction must be in (0, 1]")
     need(s.diff_ik.max_linear_speed_m_s > 0, "diff_ik.max_linear_speed_m_s must be > 0")
     need(s.diff_ik.max_angular_speed_rad_s > 0, "diff_ik.max_angular_speed_rad_s must be > 0")

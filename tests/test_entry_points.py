@@ -79,6 +79,13 @@ def test_unknown_clip_and_user(good_data):
                      "nobody/x")
 
 
+def test_replaying_all_of_a_persons_clips_says_how_to_give_a_context(good_data):
+    with h5py.File(good_data) as f:
+        user = sorted(f["users"].keys())[0]
+    _assert_one_line(_run("--gesture-file", str(good_data), "--clip", user),
+                     f"user {user!r} are being replayed", "--context-file")
+
+
 def test_malformed_yaml(tmp_path):
     path = tmp_path / "bad.yaml"
     path.write_text("cell: {mold: [1, 2\n")

@@ -149,3 +149,18 @@ def test_mold_clearance_sees_wall_contact(scenario):
     swung = q0 + np.array([0.08, 0, 0, 0, 0, 0, 0])  # base joint turned: the part swings into a wall
     touching, when = mold_clearance(scenario, np.array([0.0, 1.0]), np.stack([q0, swung]))
     assert touching < 0.0 and when == 1.0
+
+
+def test_default_run_ends_a_short_hold_after_all_six_faces(tmp_path):
+    """No --duration: the built-in person works the task, and the run stops done_hold_s (3 s) after the
+    last face counts (the live monitor and the run's score use the same rule), well before the cap."""
+    log = tmp_path / "run.h5"
+    proc = subprocess.run([sys.executable, "-m", "rtcohand_drake.run", "--scenario", "inspection",
+                           "--realtime-rate", "0", "--no-meshcat", "--log", str(log)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    with h5py.File(log) as f:
+        assert bool(f.attrs["completed"])
+        end, done = float(f.attrs["sim_duration_s"]), float(f.attrs["completion_time"])
+    assert 3.0 - 0.05 <= end - done <= 3.0 + 0.05
+    assert end < 180.0

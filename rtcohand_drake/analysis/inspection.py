@@ -38,22 +38,30 @@ def face_angles_deg(poses: np.ndarray, eye_xyz) -> np.ndarray:
     return np.degrees(np.arccos(cos))
 
 
+MAX_ANGLE_DEG = 35.0
+HOLD_S = 0.5
+
+
+def advance_holds(start: np.ndarray, inspected_at: np.ndarray, t: float, visible: np.ndarray,
+                  hold_s: float = HOLD_S) -> tuple[np.ndarray, np.ndarray]:
+    """One sample of the hold rule for the six faces: (time each face's current view began, NaN
+    if out of view; time each face's hold completed, NaN if not yet). Used after a run
+    (`measure_inspection`) and live (`systems.inspection_monitor`), so both count alike."""
+    start = np.where(visible, np.where(np.isnan(start), t, start), np.nan)
+    inspected_at = np.where(np.isnan(inspected_at) & visible & (t - start >= hold_s), t, inspected_at)
+    return start, inspected_at
+
+
 def measure_inspection(times: np.ndarray, poses: np.ndarray, eye_xyz,
-                       max_angle_deg: float = 35.0, hold_s: float = 0.5) -> InspectionResult:
+                       max_angle_deg: float = MAX_ANGLE_DEG, hold_s: float = HOLD_S) -> InspectionResult:
     times = np.asarray(times, float)
-    inspected_at = {face[0]: float("nan") for face in FACES}
+    start = np.full(len(FACES), np.nan)
+    done_at = np.full(len(FACES), np.nan)
     if len(times):
         visible = face_angles_deg(poses, eye_xyz) <= max_angle_deg
-        for f, face in enumerate(FACES):
-            start = None
-            for k, t in enumerate(times):
-                if visible[k, f]:
-                    start = t if start is None else start
-                    if t - start >= hold_s:
-                        inspected_at[face[0]] = float(t)
-                        break
-                else:
-                    start = None
+        for k, t in enumerate(times):
+            start, done_at = advance_holds(start, done_at, float(t), visible[k], hold_s)
+    inspected_at = {face[0]: float(done_at[f]) for f, face in enumerate(FACES)}
     done = [t for t in inspected_at.values() if np.isfinite(t)]
     completed = len(done) == len(FACES)
     return InspectionResult(inspected_at, len(done), completed, max(done) if completed else float("nan"))

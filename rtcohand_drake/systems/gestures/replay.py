@@ -83,7 +83,8 @@ def from_options(options, scenario):
     from rtcohand_drake.systems.gestures.registry import GestureSetup
 
     path = options.gesture_file
-    raw = sorted(read_dataset(path), key=lambda c: (c.user, c.clip_id))
+    raw_all = sorted(read_dataset(path), key=lambda c: (c.user, c.clip_id))
+    raw = raw_all
     if options.clip is not None:
         raw = find_clips(raw, options.clip)
         if not raw:
@@ -99,6 +100,12 @@ def from_options(options, scenario):
         if len(users) != 1:
             raise InputError(f"{path}: the replayed stream has {len(users)} users; "
                              "give their context with --context-file and --context-user")
+        mine = [c for c in raw_all if c.user == users[0] and c.object_velocity is not None]
+        replayed = {(c.user, c.clip_id) for c in raw}
+        if mine and all((c.user, c.clip_id) in replayed for c in mine):
+            raise InputError(f"{path}: all {len(mine)} labelled clips of user {users[0]!r} are being replayed, "
+                             "so none is left as context; replay one clip (--clip USER/CLIP) or give the "
+                             "context with --context-file PATH.h5 [--context-user USER]")
         return context_pieces(path, users[0], rate, exclude=names)[0]
 
     return GestureSetup(source, default_context, source.end_time)
