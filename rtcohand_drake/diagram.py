@@ -31,7 +31,12 @@ from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
 from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.stations.sim import make_sim_station
-from rtcohand_drake.interfaces import FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, READ_VARIANCE, SPEED_SCALE, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import FACES_INSPECTED, FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, READ_VARIANCE, SPEED_SCALE, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+
+
+# Meshcat's starting view (world frame, m): three-quarter, over the inspector's right shoulder.
+VIEW_CAMERA_W = np.array([1.1, 1.15, 1.0])
+VIEW_TARGET_W = np.array([0.3, 0.1, 0.45])
 
 
 @dc.dataclass
@@ -130,6 +135,12 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         connect(supervisor.GetOutputPort(TWIST_COMMAND), overlay.GetInputPort(TWIST_COMMAND))
         connect(supervisor.GetOutputPort(SAFETY_STATUS), overlay.GetInputPort(SAFETY_STATUS))
         connect(station.GetOutputPort(WORKPIECE_POSE), overlay.GetInputPort(WORKPIECE_POSE))
+        connect(source.GetOutputPort(GESTURE_STATUS), overlay.GetInputPort(GESTURE_STATUS))
+        connect(monitor.GetOutputPort(FACES_INSPECTED), overlay.GetInputPort(FACES_INSPECTED))
+        if policy is not None:
+            connect(policy.GetOutputPort(POLICY_STD), overlay.GetInputPort(POLICY_STD))
+        # A close three-quarter view from the inspector's side: the arm, the mold and the glass fill it.
+        meshcat.SetCameraPose(VIEW_CAMERA_W, VIEW_TARGET_W)
     diagram = builder.Build()
     diagram.set_name("rtcohand_run")
     name = gesture_source or ("scripted" if policy is None else type(source).__name__)
