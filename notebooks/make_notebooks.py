@@ -78,11 +78,14 @@ plt.tight_layout()'''),
 The same drawing is in `diagrams/` (`python -m rtcohand_drake.draw_diagrams`)."""),
     new_code_cell('''from IPython.display import SVG, display
 import shutil, subprocess
+from pathlib import Path
+import rtcohand_drake
 dot = run.diagram.GetGraphvizString(max_depth=1)
 if shutil.which("dot"):
     display(SVG(subprocess.run(["dot", "-Tsvg"], input=dot.encode(), capture_output=True).stdout))
-else:
-    print(dot[:500])'''),
+else:  # no Graphviz here: the committed drawing of the same diagram
+    print("Graphviz (dot) is not installed; showing the committed diagrams/run_scripted.svg")
+    display(SVG(filename=str(Path(rtcohand_drake.__file__).parents[1] / "diagrams" / "run_scripted.svg")))'''),
 ]
 
 TRAIN = [
@@ -144,8 +147,10 @@ write_dataset(work / "my_clips.h5", clips)
 print(len(clips), "labelled clips written to", work / "my_clips.h5")
 for c in clips[:4]:
     print(c.name, "active dims", list(c.active_dims), "|", c.description[:80])'''),
-    new_code_cell('''from rtcohand_drake.data.plots import clip_figure
-fig = clip_figure(read_dataset(work / "my_clips.h5")[0])'''),
+    new_code_cell('''%matplotlib inline
+from IPython.display import display
+from rtcohand_drake.data.plots import clip_figure
+display(clip_figure(read_dataset(work / "my_clips.h5")[0]))'''),
     new_markdown_cell("""Before the session: how well does the policy read each of this user's gestures?
 Each clip is played through the policy with the user's other clips as context (held out, as in
 the run). A gain of 1 moves the part at the speed the labels say; a gesture read well below half

@@ -34,15 +34,12 @@ def _draw_hand(ax, kp: np.ndarray, title: str) -> None:
 
 
 def clip_figure(clip: Clip, rate_hz: float = 10.0, n_hands: int = 4):
-    """A matplotlib figure of one clip (Agg backend)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """A matplotlib figure of one clip (a `Figure`: a notebook shows it, `savefig` writes it)."""
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
 
     pc = to_policy_clip(clip, rate_hz)
     t = np.arange(len(pc)) / rate_hz
-    fig = plt.figure(figsize=(12, 10), constrained_layout=True)
+    fig = Figure(figsize=(12, 10), constrained_layout=True)
     grid = fig.add_gridspec(4, n_hands, height_ratios=[1.2, 1, 1, 1])
     dims = ", ".join(DIMENSIONS[d] for d in clip.active_dims) or "none"
     fig.suptitle(f"{clip.name}  ({clip.group}, {clip.split}; active: {dims})\n{clip.description}", fontsize=10)
@@ -109,11 +106,7 @@ def clip_figure(clip: Clip, rate_hz: float = 10.0, n_hands: int = 4):
 
 def plot_clip(clip: Clip, out: str, rate_hz: float = 10.0) -> None:
     """Write the figure of one clip to ``out`` (any matplotlib format, e.g. .png)."""
-    import matplotlib.pyplot as plt
-
-    fig = clip_figure(clip, rate_hz)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    clip_figure(clip, rate_hz).savefig(out, dpi=110)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -240,13 +240,11 @@ def markdown_report(results: Dict) -> str:
 
 
 def plot_noise_sweep(sweep: Dict, path: pathlib.Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
 
     x = [r for _, r in sweep["levels"]]
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.3))
+    fig = Figure(figsize=(9, 3.3))
+    axes = fig.subplots(1, 2)
     for name, d in sweep["models"].items():
         axes[0].errorbar(x, d["elbo_loss"], yerr=d["elbo_loss_std"], label=name, capsize=2, lw=1)
         axes[1].errorbar(x, d["mse"], yerr=d["mse_std"], label=name, capsize=2, lw=1)
@@ -256,17 +254,14 @@ def plot_noise_sweep(sweep: Dict, path: pathlib.Path) -> None:
     axes[1].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def plot_spectrum(spec: Dict, path: pathlib.Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
 
     levels = spec["levels"]
-    fig, axes = plt.subplots(1, len(levels), figsize=(3.3 * len(levels), 3.0), sharey=True)
+    fig = Figure(figsize=(3.3 * len(levels), 3.0))
+    axes = fig.subplots(1, len(levels), sharey=True)
     for i, lv in enumerate(levels):
         ax = axes[i]
         ax.semilogy(spec["freqs"], spec["ground_truth_power"], "k--", lw=1, label="ground truth")
@@ -278,7 +273,6 @@ def plot_spectrum(spec: Dict, path: pathlib.Path) -> None:
     axes[-1].legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 DIM_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -286,10 +280,7 @@ DIM_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 
 def plot_attention(model, episode, path: pathlib.Path) -> None:
     """Target time vs context time attention, with the context velocities alongside."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
 
     batch = collate([(episode.target_features, episode.target.labels)], [episode.context])
     pred = model.predict(batch, keep_attention=True)
@@ -298,7 +289,7 @@ def plot_attention(model, episode, path: pathlib.Path) -> None:
     att = att.mean(1)[:, mask].numpy()  # (T, K valid)
     y_c = batch.y_c[0].reshape(-1, 6)[mask].numpy()
     dims = [int(d) for d in episode.target.active_dims] or list(range(6))
-    fig = plt.figure(figsize=(8, 5.5))
+    fig = Figure(figsize=(8, 5.5))
     gs = fig.add_gridspec(2, 2, width_ratios=(1, 4), height_ratios=(4, 1.3), wspace=0.05, hspace=0.08)
     ax_v = fig.add_subplot(gs[0, 0])
     ax_a = fig.add_subplot(gs[0, 1], sharey=ax_v)
@@ -321,7 +312,6 @@ def plot_attention(model, episode, path: pathlib.Path) -> None:
     ax_t.set_xlabel("target step (dashed: ground truth)")
     ax_t.legend(fontsize=6)
     fig.savefig(path, dpi=90, bbox_inches="tight")
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- main

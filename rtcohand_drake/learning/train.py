@@ -310,12 +310,10 @@ def _save(model, cfg, step, history, out_dir, data, start, samples, world, name=
 
 
 def plot_history(history: Dict[str, List], path: pathlib.Path, title: str = "") -> None:
-    import matplotlib
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+    fig = Figure(figsize=(9, 3.2))
+    axes = fig.subplots(1, 2)
     if history["step"]:
         axes[0].plot(history["step"], history["loss"], lw=0.8, label="train -ELBO (teacher forcing)")
         if history["val_step"]:
@@ -336,7 +334,6 @@ def plot_history(history: Dict[str, List], path: pathlib.Path, title: str = "") 
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- CLI
