@@ -2,7 +2,7 @@
 
     python -m rtcohand_drake.run --scenario inspection        # a built-in name, or a path to a scenario YAML file
         [--duration S] [--realtime-rate R] [--no-meshcat | --no-wait] [--seed N]
-        [--gesture-source synthetic|replay|camera|scripted]
+        [--gesture-source synthetic|replay|camera|scripted|joystick]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
         [--context-file PATH.h5 [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
@@ -87,8 +87,8 @@ def _check_args(args) -> None:
         raise InputError("command line: --gesture-source replay needs --gesture-file PATH.h5")
     if args.gesture_source != "replay" and (args.gesture_file is not None or args.clip is not None):
         raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
-    if args.population_seed is not None and args.gesture_source != "synthetic":
-        raise InputError("command line: --population-seed goes with the synthetic gesture source")
+    if args.population_seed is not None and args.gesture_source not in ("synthetic", "joystick"):
+        raise InputError("command line: --population-seed goes with the synthetic and joystick gesture sources")
     if args.context_user is not None and args.context_file is None:
         raise InputError("command line: --context-user goes with --context-file")
     if args.hardware and not args.robot_ip:

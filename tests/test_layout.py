@@ -62,7 +62,7 @@ def test_top_level_holds_at_most_ten_modules_of_substance():
     substantive = sorted(p.name for p in top if not _is_thin_entry(p))
     thin = sorted(p.stem for p in top if _is_thin_entry(p))
     assert len(substantive) <= 10, substantive
-    assert set(thin) == {"train", "evaluate", "export", "context_reading", "initial_pose"}
+    assert set(thin) == {"train", "evaluate", "export", "context_reading", "initial_pose", "study"}
     for folder in ("systems", "stations", "cell", "learning", "data", "analysis"):
         assert (PACKAGE / folder / "__init__.py").is_file(), folder
 

@@ -43,6 +43,9 @@ GESTURE_SOURCES: dict[str, GestureSourceEntry] = {
     "scripted": GestureSourceEntry("rtcohand_drake.systems.scripted_twist",
                                    "the scenario's scripted_motion, straight to the supervisor (no policy)",
                                    uses_policy=False),
+    "joystick": GestureSourceEntry("rtcohand_drake.systems.joystick",
+                                   "the built-in simulated person at the arm maker's joystick (no policy; "
+                                   "--user, --population-seed)", uses_policy=False),
 }
 
 
