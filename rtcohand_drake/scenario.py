@@ -136,9 +136,6 @@ def _check_values(s: Scenario, source: str) -> None:
     need(d.min_cell_clearance_m >= 0 and d.cell_clearance_within_m > d.min_cell_clearance_m
          and d.clearance_approach_time_s > 0,
          "diff_ik: need min_cell_clearance_m >= 0, cell_clearance_within_m > it, clearance_approach_time_s > 0")
-    from rtcohand_drake.systems.diff_ik import SOLVERS
-
-    need(d.solver in SOLVERS, f"diff_ik.solver must be one of {', '.join(sorted(SOLVERS))}, got {d.solver!r}")
     need(d.tracking_weight > 0, "diff_ik.tracking_weight must be > 0")
     need(d.joint_position_influence_rad > d.joint_position_margin_rad,
          "diff_ik.joint_position_influence_rad must be > joint_position_margin_rad")
