@@ -312,10 +312,7 @@ class TwistToJointVelocity(LeafSystem):
 
     def _solve_qp(self, q, v_current, V, moving):
         """Drake's answer (None when its QP failed) and the clearance it was given (or None)."""
-        dv = self._cfg.joint_acceleration_rad_s2 * self._dt
-        self._joint_velocity.SetJointLimits(self._joint_limits(
-            np.maximum(-self.joint_velocity_limit, v_current - dv),
-            np.minimum(self.joint_velocity_limit, v_current + dv)))
+        self._joint_velocity.SetJointLimits(self._joint_limits(*self._velocity_bounds(q, v_current)))
         clearance = self._hold_pairs_inside_margin(q) if self._clearance_on else None
         system, context = self._system, self._system_context
         system.get_input_port_position().FixValue(context, q)
@@ -323,11 +320,42 @@ class TwistToJointVelocity(LeafSystem):
         bus = BusValue()
         bus.Set(self._frame_name, AbstractValue.Make(SpatialVelocity(V[:3], V[3:])))
         system.get_input_port_desired_cartesian_velocities().FixValue(context, bus)
-        with _console_silenced():
-            v_qp = system.get_output_port_commanded_velocity().Eval(context).copy()
+        try:
+            with _console_silenced():
+                v_qp = system.get_output_port_commanded_velocity().Eval(context).copy()
+        except RuntimeError:
+            return None, clearance  # limits the servo's lag made inconsistent: treated as no solution
         if moving and not v_qp.any():
             return None, clearance  # Drake's system answers exactly zero when its QP fails
         return v_qp, clearance
+
+    def _velocity_bounds(self, q, v_current):
+        """The bounds to give Drake's JointVelocityLimitConstraint so that, after it cuts the
+        bound toward the nearer position limit by its factor s, the QP sees the speed limit
+        (cut by s) intersected with what the acceleration limit allows this period."""
+        cfg = self._cfg
+        v_max = self.joint_velocity_limit
+        dv = cfg.joint_acceleration_rad_s2 * self._dt
+        lo, hi = np.maximum(-v_max, v_current - dv), np.minimum(v_max, v_current + dv)
+        lower, upper = self._position_limits
+        to_lower, to_upper = q - lower, upper - q
+        near_upper = to_upper < to_lower  # the side Drake cuts (Drake's own test)
+        s = np.clip((np.minimum(to_lower, to_upper) - cfg.joint_position_margin_rad)
+                    / (cfg.joint_position_influence_rad - cfg.joint_position_margin_rad), 0.0, 1.0)
+        # The cut bound, but never so tight that slowing down at the acceleration limit is
+        # ruled out (a joint the servo's lag carried in too fast); the clip after the QP holds.
+        hi = np.where(near_upper, np.maximum(np.minimum(hi, v_max * s), lo + 1e-9), hi)
+        lo = np.where(near_upper, lo, np.minimum(np.maximum(lo, -v_max * s), hi - 1e-9))
+        # A positive cut bound is passed divided by s, so that Drake's cut gives it back; a
+        # bound of the other sign Drake only loosens toward 0 (the clip after the QP holds);
+        # at s = 0 Drake's bound is 0, so the other bound must allow 0.
+        cut = s > 0
+        safe = np.where(cut, s, 1.0)
+        hi_passed = np.where(near_upper & cut & (hi > 0), hi / safe, hi)
+        lo_passed = np.where(~near_upper & cut & (lo < 0), lo / safe, lo)
+        lo_passed = np.where(near_upper & ~cut, np.minimum(lo, 0.0), lo_passed)
+        hi_passed = np.where(~near_upper & ~cut, np.maximum(hi, 0.0), hi_passed)
+        return lo_passed, hi_passed
 
     def _hold_pairs_inside_margin(self, q):
         """Pads each robot-cell body pair already inside the margin up to it (held, not pushed);
