@@ -48,8 +48,8 @@ print("workpiece at start (resting in the mold):", station.GetOutputPort("workpi
     new_markdown_cell("""## 2. One system alone: the differential IK
 Fix its input ports and evaluate one discrete update: the joint velocities
 that lift the workpiece straight up at 5 cm/s."""),
-    new_code_cell('''from rtcohand_drake.systems.diff_ik import TwistToJointVelocity
-ik = TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
+    new_code_cell('''from rtcohand_drake.systems.diff_ik import make_twist_to_joint_velocity
+ik = make_twist_to_joint_velocity(scenario)  # Drake's DifferentialInverseKinematicsSystem inside
 ik_ctx = ik.CreateDefaultContext()
 ik.GetInputPort("twist_command").FixValue(ik_ctx, [0, 0, 0.05, 0, 0, 0])
 ik.GetInputPort("gen3.position_measured").FixValue(ik_ctx, scenario.robot.q0_rad)

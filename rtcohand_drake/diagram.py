@@ -19,7 +19,7 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity
+from rtcohand_drake.systems.diff_ik import FollowStatus, make_twist_to_joint_velocity
 from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
 from rtcohand_drake.systems.operator_panel import MeshcatOperatorPanel, ScheduledOperatorPanel
 from rtcohand_drake.run_log import RunLog
@@ -43,7 +43,7 @@ VIEW_TARGET_W = np.array([0.3, 0.1, 0.45])
 class RunDiagram:
     diagram: Diagram
     station: Diagram
-    controller: TwistToJointVelocity
+    controller: LeafSystem  # the differential IK (systems.diff_ik.SOLVERS)
     supervisor: SafetySupervisor
     source: LeafSystem
     operator: LeafSystem
@@ -62,7 +62,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     """Wires a run. Without `policy`, `source` must offer `twist_request` (default: the scenario's script)."""
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", station or make_sim_station(scenario))
-    controller = builder.AddNamedSystem("diff_ik", TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s))
+    controller = builder.AddNamedSystem("diff_ik", make_twist_to_joint_velocity(scenario))
     R_WU = scenario.cell.user_frame.to_rigid_transform().rotation().matrix()
     command_period = (scenario.command_filter.command_period_s if scenario.command_filter.mode == "paper"
                       else 1.0 / scenario.policy.rate_hz)

@@ -141,6 +141,9 @@ def _check_values(s: Scenario, source: str) -> None:
     need(d.min_cell_clearance_m >= 0 and d.cell_clearance_within_m > d.min_cell_clearance_m
          and d.clearance_approach_time_s > 0,
          "diff_ik: need min_cell_clearance_m >= 0, cell_clearance_within_m > it, clearance_approach_time_s > 0")
+    need(d.tracking_weight > 0, "diff_ik.tracking_weight must be > 0")
+    need(d.joint_position_influence_rad > d.joint_position_margin_rad,
+         "diff_ik.joint_position_influence_rad must be > joint_position_margin_rad")
     f = s.command_filter
     need(f.mode in ("paper", "responsive"), f"command_filter.mode must be 'paper' or 'responsive', got {f.mode!r}")
     need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")

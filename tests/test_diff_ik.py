@@ -1,4 +1,4 @@
-"""Differential IK: follows a commanded workpiece twist and respects every limit."""
+"""Differential IK (Drake's DifferentialInverseKinematicsSystem): follows a commanded workpiece twist and respects every limit."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,9 @@ from pydrake.math import RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from rtcohand_drake.systems.diff_ik import FollowStatus, TwistToJointVelocity, clamp_twist
+from pydrake.multibody.inverse_kinematics import DifferentialInverseKinematicsSystem
+
+from rtcohand_drake.systems.diff_ik import FollowStatus, clamp_twist, make_twist_to_joint_velocity
 from rtcohand_drake.cell.initial_pose import GEN3_HOME_RAD
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.stations.sim import make_sim_station
@@ -25,7 +27,7 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def controller(scenario):
-    return TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
+    return make_twist_to_joint_velocity(scenario)
 
 
 def test_clamp_twist_keeps_direction():
@@ -47,7 +49,7 @@ def test_user_frame_mapping(controller, scenario):
 def _closed_loop(scenario, twist, duration):
     builder = DiagramBuilder()
     station = builder.AddSystem(make_sim_station(scenario))
-    ik = builder.AddSystem(TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s))
+    ik = builder.AddSystem(make_twist_to_joint_velocity(scenario))
     builder.Connect(station.GetOutputPort(POSITION_MEASURED), ik.GetInputPort(POSITION_MEASURED))
     builder.Connect(ik.GetOutputPort(VELOCITY_COMMAND), station.GetInputPort(VELOCITY_COMMAND))
     builder.ExportInput(ik.GetInputPort(TWIST_COMMAND), "twist")
@@ -123,3 +125,34 @@ def test_non_finite_twist_is_treated_as_zero(controller):
     v, status, _ = controller.solve(Q_FREE, np.zeros(7), np.array([np.nan, 0, 0, 0, np.inf, 0]))
     assert np.allclose(v, 0.0, atol=1e-9)
     assert status == FollowStatus.INVALID_INPUT
+
+
+def test_the_qp_is_drakes_system(controller):
+    assert isinstance(controller.drake_system, DifferentialInverseKinematicsSystem)
+    assert controller.drake_system.recipe().num_ingredients() == 5  # costs: 2, constraints: 3
+
+
+def test_a_zero_twist_while_moving_brings_the_part_to_rest(scenario, controller):
+    """Asked for nothing while still moving: within the acceleration limit the part's speed
+    only falls, and the arm comes to rest (no joint centering keeps it going)."""
+    v = controller.joint_velocity_limit * 0.5 * np.array([1, -1, 1, -1, 1, -1, 1])
+    dv = scenario.diff_ik.joint_acceleration_rad_s2 * scenario.control_period_s
+    plant = controller.control_plant
+    context = plant.CreateDefaultContext()
+    frame = plant.GetFrameByName("workpiece")
+
+    def part_speed(q, v):
+        plant.SetPositions(context, q)
+        plant.SetVelocities(context, v)
+        return np.linalg.norm(frame.CalcSpatialVelocityInWorld(context).get_coeffs())
+
+    q = Q_FREE.copy()
+    speed = part_speed(q, v)
+    for _ in range(40):
+        v_next, status, _ = controller.solve(q, v, np.zeros(6))
+        assert status != FollowStatus.NO_SOLUTION
+        assert np.all(np.abs(v_next - v) <= dv + 1e-9)
+        q, v = q + v_next * scenario.control_period_s, v_next
+        assert part_speed(q, v) <= speed + 1e-6
+        speed = part_speed(q, v)
+    assert np.allclose(v, 0.0, atol=1e-6)

@@ -2,39 +2,21 @@
 
 `CellClearance` poses the cell's collision geometry at given joint angles (its
 own MultibodyPlant and SceneGraph, the same models as the station) and answers
-two questions with SceneGraph's signed-distance queries:
-
-- `close_pairs(q, within_m)`: every robot-cell geometry pair closer than
-  `within_m`, with its distance d and the gradient g = dd/dq (1/m per rad),
-  so that d changes at g . v under joint velocities v. The differential IK
-  uses it to keep the arm from driving into the cell.
-- `min_distance(q)`: the closest any robot geometry comes to the cell (for
-  scoring a run log).
-
-Controllers build their own copy, never the station's plant, so this works
-the same against the hardware station.
+with SceneGraph's signed-distance queries: `min_distance(q)` is the closest any
+robot geometry comes to the cell, and which pair that is (for scoring a run
+log). The differential IK keeps its own clearance through Drake's collision
+checker (`rtcohand_drake.systems.diff_ik`).
 """
 
 from __future__ import annotations
 
-import dataclasses as dc
-
 import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, Role
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import DiagramBuilder
 
 ROBOT = ("gen3", "gripper", "workpiece")
 CELL = ("table", "mold", "safety_glass")
-
-
-@dc.dataclass
-class ClosePair:
-    distance: float  # m, signed (negative: penetrating)
-    gradient: np.ndarray  # (7,) dd/dq
-    robot: str  # the robot geometry's name
-    cell: str  # the cell geometry's name
 
 
 class CellClearance:
@@ -69,10 +51,6 @@ class CellClearance:
         manager.Apply(declaration)
         self._robot_ids = set(inspector.GetGeometryIds(robot_set, Role.kProximity))
         self._cell_ids = set(inspector.GetGeometryIds(cell_set, Role.kProximity))
-        self._body_of = {}
-        for g in self._robot_ids | self._cell_ids:
-            body = self.plant.GetBodyFromFrameId(inspector.GetFrameId(g))
-            self._body_of[g] = (body, inspector.GetPoseInFrame(g))
 
     def _pairs(self, q: np.ndarray, within_m: float):
         self.plant.SetPositions(self._plant_context, q)
@@ -80,58 +58,16 @@ class CellClearance:
         for pair in query.ComputeSignedDistancePairwiseClosestPoints(within_m):
             a, b = pair.id_A, pair.id_B
             if a in self._robot_ids and b in self._cell_ids:
-                yield pair, a, pair.p_ACa, b, pair.p_BCb, pair.nhat_BA_W
+                yield pair, a, b
             elif b in self._robot_ids and a in self._cell_ids:
-                yield pair, b, pair.p_BCb, a, pair.p_ACa, -pair.nhat_BA_W
-
-    def close_pairs(self, q: np.ndarray, within_m: float) -> list[ClosePair]:
-        """Robot-cell pairs closer than `within_m`, each with dd/dq (see module doc)."""
-        out = []
-        world = self.plant.world_frame()
-        for pair, robot_id, p_RC, cell_id, p_CC, n_W in self._pairs(q, within_m):
-            # n_W points from the cell's witness point toward the robot's: d grows as the
-            # robot's point moves along n_W (the cell is welded to the world).
-            body, X_BG = self._body_of[robot_id]
-            J = self.plant.CalcJacobianTranslationalVelocity(
-                self._plant_context, JacobianWrtVariable.kV, body.body_frame(), X_BG @ p_RC, world, world)
-            out.append(ClosePair(float(pair.distance), np.asarray(n_W) @ J,
-                                 self._inspector.GetName(robot_id), self._inspector.GetName(cell_id)))
-        return out
+                yield pair, b, a
 
     def min_distance(self, q: np.ndarray, within_m: float = 0.1) -> tuple[float, str]:
         """The smallest robot-cell distance (m) and the pair ("robot geometry / cell geometry"); inf if none within."""
         best, which = float("inf"), ""
-        for pair, robot_id, _, cell_id, _, _ in self._pairs(q, within_m):
+        for pair, robot_id, cell_id in self._pairs(q, within_m):
             if pair.distance < best:
                 best = float(pair.distance)
                 which = f"{self._inspector.GetName(robot_id)} / {self._inspector.GetName(cell_id)}"
         return best, which
 
-
-def hold_clearance(v: np.ndarray, pairs: list[ClosePair], min_clearance_m: float, approach_time_s: float,
-                   passes: int = 4) -> tuple[np.ndarray, bool]:
-    """Joint velocities v with what drives the robot into the cell removed.
-
-    Each close pair may shrink at most at (d - min_clearance_m) / approach_time_s
-    (so the approach slows to nothing at the margin), and not at all once
-    inside it; nothing is ever pushed away. v is projected onto those
-    half-spaces g . v >= -max(d - margin, 0) / T in turn (a few passes).
-    Returns (v, whether anything was removed).
-    """
-    v = np.array(v, float)
-    acted = False
-    for _ in range(passes):
-        changed = False
-        for p in pairs:
-            g = p.gradient
-            gg = float(g @ g)
-            if gg < 1e-12:
-                continue
-            bound = -max(p.distance - min_clearance_m, 0.0) / approach_time_s
-            rate = float(g @ v)
-            if rate < bound - 1e-12:
-                v += (bound - rate) / gg * g
-                changed = acted = True
-        if not changed:
-            break
-    return v, acted

@@ -1,15 +1,31 @@
 """Differential inverse kinematics: workpiece twist (user frame) -> Gen3 joint velocities.
 
 `TwistToJointVelocity` is a discrete LeafSystem running at the scenario's
-control period. Each period it solves Drake's `DoDifferentialInverseKinematics`
-QP for the joint velocity that moves the workpiece centre with the commanded
-linear velocity v and turns the workpiece about its centre with the commanded
-angular velocity w (docs/interfaces.md (frames and the meaning of a twist); both given in the user frame U), subject to
-joint position limits (with a margin), joint velocity and acceleration limits,
-and a Cartesian speed limit, with joint centering in the null space. Then the
-part of the answer that would drive the arm, gripper or part into the cell
-(table, mold, glass) is removed: a robot-cell pair may close in no faster than
-its distance beyond `min_cell_clearance_m` allows (`rtcohand_drake.cell.clearance`).
+control period. Each period it evaluates Drake's own
+`DifferentialInverseKinematicsSystem` (pydrake.multibody.inverse_kinematics),
+a QP built from Drake's ingredients, for the joint velocity that moves the
+workpiece centre with the commanded linear velocity v and turns the workpiece
+about its centre with the commanded angular velocity w (docs/interfaces.md
+(frames and the meaning of a twist); both given in the user frame U):
+
+- `LeastSquaresCost`: |V_desired - J v|², V in the world frame, weight `tracking_weight`;
+- `JointCenteringCost`: toward the nominal posture (the scenario's `robot.q0_rad`)
+  in the null space of J, gain `joint_centering_gain`;
+- `CartesianVelocityLimitConstraint`: each component of the workpiece's angular
+  and linear velocity within `max_angular_speed_rad_s` and `max_linear_speed_m_s`;
+- `JointVelocityLimitConstraint`: the joint speed limits intersected with what
+  the acceleration limit allows from the current command this period; a joint's
+  speed toward its position limit is cut linearly from
+  `joint_position_influence_rad` to zero at `joint_position_margin_rad`;
+- `CollisionConstraint` through a `SceneGraphCollisionChecker` (the arm, gripper
+  and part against the table, mold and glass): with the constraint's horizon
+  set to `clearance_approach_time_s`, a pair closer than `cell_clearance_within_m`
+  may close in at most at (d - min_cell_clearance_m) / approach time. A pair
+  already inside the margin (the part seated in the mold) is held where it is,
+  never pushed away: its padding in the checker is set to d - margin for the period.
+
+The answer is clipped to the acceleration and speed limits (the QP solver meets
+its bounds to a tolerance; the limits are hard).
 
 Input ports
   twist_command           (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
@@ -18,34 +34,38 @@ Input ports
 Output ports
   gen3.velocity_command   (7) rad/s
   follow_status           (2) [status, ratio]: status 0 = following, 1 = slowed by a
-                          limit (ratio < follow_ratio_threshold), 2 = stuck, 3 = no
-                          solution (the command is then zero), 4 = invalid
+                          limit (ratio < follow_ratio_threshold), 2 = stuck (a solution,
+                          but under 1 % of the commanded twist), 3 = no solution (the
+                          command then comes down at the acceleration limit), 4 = invalid
                           (non-finite) twist, treated as zero, 5 = held back from
-                          the cell (clearance); ratio = the fraction of the
+                          the cell (a collision row binding); ratio = the fraction of the
                           commanded twist that the joint velocities achieve.
 
-A zero twist means no motion at all: joint centering is switched off, so the
-arm never drifts in its null space when nobody asks it to move.
+A zero twist means no motion at all: the nominal posture is then the current
+one, so the arm never drifts in its null space when nobody asks it to move.
 """
 
 # No `from __future__ import annotations`: Drake's yaml_load_typed reads the real field types.
+import contextlib
 import dataclasses as dc
 import enum
+import functools
 import math
+import os
+import sys
 
 import numpy as np
+from pydrake.common import Parallelism
+from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.multibody.inverse_kinematics import (
-    DifferentialInverseKinematicsParameters,
-    DifferentialInverseKinematicsStatus,
-    DoDifferentialInverseKinematics,
-)
+from pydrake.multibody.inverse_kinematics import DifferentialInverseKinematicsSystem as DiffIkSystem
+from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem
+from pydrake.planning import DofMask, JointLimits, RobotDiagramBuilder, SceneGraphCollisionChecker
+from pydrake.systems.framework import BusValue, LeafSystem
 
-from rtcohand_drake.cell.clearance import CellClearance, hold_clearance
 from rtcohand_drake.cell.layout import Cell
-from rtcohand_drake.cell.plant import make_control_plant
+from rtcohand_drake.cell.plant import add_cell_models, make_control_plant
 from rtcohand_drake.interfaces import FOLLOW_STATUS, POSITION_MEASURED, TWIST_COMMAND, VELOCITY_COMMAND
 
 
@@ -56,19 +76,25 @@ class DiffIk:
     # Fraction of the actuators' speed limits (80 deg/s large, 70 deg/s small) the solver may use.
     joint_velocity_fraction: float = 0.5
     joint_acceleration_rad_s2: float = 4.0
-    # Keep this far inside the limited joints' position limits (MoveIt Servo's default margin).
+    # Speed toward a limited joint's position limit is zero this far inside it (MoveIt Servo's
+    # default margin) ...
     joint_position_margin_rad: float = 0.1
+    # ... and cut linearly from this distance on (Drake's JointVelocityLimitConstraint).
+    joint_position_influence_rad: float = 0.3
     # Continuous joints have no limit; the solver uses +-this to stay finite.
     continuous_joint_range_rad: float = 4 * math.pi
     # Cartesian speed limits on the workpiece centre (ISO 10218 reduced speed: 0.25 m/s).
     max_linear_speed_m_s: float = 0.25
     max_angular_speed_rad_s: float = 1.0
+    # Weight of the twist-tracking least-squares cost; the joint centering cost has weight 1
+    # (Drake advises about 100 between them).
+    tracking_weight: float = 100.0
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
     # Clearance from the cell (table, mold, glass) for the arm, gripper and part: a pair
     # closer than cell_clearance_within_m may shrink at most at (d - margin) / approach time,
-    # and not at all inside min_cell_clearance_m (rtcohand_drake.cell.clearance). 0 switches it off.
+    # and not at all inside min_cell_clearance_m. 0 switches it off.
     min_cell_clearance_m: float = 0.02
     cell_clearance_within_m: float = 0.10
     clearance_approach_time_s: float = 0.2
@@ -83,6 +109,14 @@ class FollowStatus(enum.IntEnum):
     CLEARANCE = 5
 
 
+# With a solution, below this fraction of the commanded twist the arm counts as stuck
+# (the threshold DoDifferentialInverseKinematics puts on its speed scale).
+STUCK_RATIO = 1e-2
+# A collision row counts as binding within this rate of its bound (m/s).
+BINDING_ROW_TOLERANCE_M_S = 1e-3
+ROBOT_MODELS = ("gen3", "gripper", "workpiece")
+
+
 def clamp_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
     """Scales v and w separately so |v| <= max_linear and |w| <= max_angular (direction kept)."""
     twist = np.array(twist, dtype=float)
@@ -93,8 +127,64 @@ def clamp_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.
     return twist
 
 
+@contextlib.contextmanager
+def _console_silenced():
+    """Standard output and error closed at the file-descriptor level for the block.
+
+    Drake's system solves with OSQP under options of its own, and OSQP prints a line
+    ("Polishing not needed ...") at most solves; a failed solve is logged as a
+    warning. Both reach the console from C every period; `follow_status` reports
+    the failure instead."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        os.dup2(_devnull(), 1)
+        os.dup2(_devnull(), 2)
+        yield
+    finally:
+        _libc().fflush(None)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+
+
+@functools.cache
+def _devnull() -> int:
+    return os.open(os.devnull, os.O_WRONLY)
+
+
+@functools.cache
+def _libc():
+    import ctypes
+
+    return ctypes.CDLL(None)
+
+
+def make_collision_checker(cell: Cell) -> tuple[SceneGraphCollisionChecker, object]:
+    """A checker of the arm, gripper and held part (the robot) against the cell; (checker, its plant).
+
+    Self-collision is left to the joint limits, as in the station: only robot-cell pairs count."""
+    builder = RobotDiagramBuilder(time_step=0.0)
+    plant = builder.plant()
+    instances = add_cell_models(plant, cell)
+    plant.Finalize()
+    robot = [instances[name] for name in ROBOT_MODELS]
+    checker = SceneGraphCollisionChecker(
+        model=builder.Build(), robot_model_instances=robot, edge_step_size=0.05,
+        env_collision_padding=0.0, self_collision_padding=0.0, implicit_context_parallelism=Parallelism(False))
+    bodies = [plant.get_body(i) for r in robot for i in plant.GetBodyIndices(r)]
+    for k, a in enumerate(bodies):
+        for b in bodies[k + 1:]:
+            checker.SetCollisionFilteredBetween(a, b, True)
+    return checker, plant
+
+
 class TwistToJointVelocity(LeafSystem):
-    """Commanded workpiece twist -> joint velocity command, by differential IK (see module doc)."""
+    """Commanded workpiece twist -> joint velocity command, by Drake's
+    `DifferentialInverseKinematicsSystem` (see module doc). The inner system is
+    evaluated inside this system's periodic update, on a context of its own."""
 
     def __init__(self, config: "DiffIk", cell: Cell, q_nominal_rad, control_period_s: float):
         """`config`: the scenario's `diff_ik`; `cell`: its layout; `q_nominal_rad`: the
@@ -107,31 +197,47 @@ class TwistToJointVelocity(LeafSystem):
         cfg = config
         self._cfg = cfg
         self._dt = control_period_s
+        self._q_nominal = np.asarray(q_nominal_rad, float)
         n = self._plant.num_velocities()
         assert n == 7, "the control plant must have exactly the arm's 7 degrees of freedom"
 
-        params = DifferentialInverseKinematicsParameters(num_positions=n, num_velocities=n)
-        params.set_time_step(self._dt)
         lower = self._plant.GetPositionLowerLimits().copy()
         upper = self._plant.GetPositionUpperLimits().copy()
         continuous = ~np.isfinite(lower) | ~np.isfinite(upper)
-        lower = np.where(continuous, -cfg.continuous_joint_range_rad, lower + cfg.joint_position_margin_rad)
-        upper = np.where(continuous, cfg.continuous_joint_range_rad, upper - cfg.joint_position_margin_rad)
-        params.set_joint_position_limits((lower, upper))
-        self.joint_position_limits = (lower, upper)
-        v_max = cfg.joint_velocity_fraction * self._plant.GetVelocityUpperLimits()
-        params.set_joint_velocity_limits((-v_max, v_max))
-        self.joint_velocity_limit = v_max
-        a = np.full(n, cfg.joint_acceleration_rad_s2)
-        params.set_joint_acceleration_limits((-a, a))
-        params.set_end_effector_angular_speed_limit(cfg.max_angular_speed_rad_s)
-        lin = np.full(3, cfg.max_linear_speed_m_s)
-        params.set_end_effector_translational_velocity_limits(-lin, lin)
-        params.set_nominal_joint_position(np.asarray(q_nominal_rad, float))
-        self._params = params
-        self._clearance = CellClearance(cell) if cfg.min_cell_clearance_m > 0 else None
-        self._centering = cfg.joint_centering_gain * np.eye(n)
-        self._no_centering = np.zeros((n, n))
+        lower = np.where(continuous, -cfg.continuous_joint_range_rad, lower)
+        upper = np.where(continuous, cfg.continuous_joint_range_rad, upper)
+        margin = np.where(continuous, 0.0, cfg.joint_position_margin_rad)
+        # Where a joint stops: the limits shrunk by the margin.
+        self.joint_position_limits = (lower + margin, upper - margin)
+        self.joint_velocity_limit = cfg.joint_velocity_fraction * self._plant.GetVelocityUpperLimits()
+        self._position_limits = (lower, upper)
+
+        self._checker, self._checker_plant = make_collision_checker(cell)
+        self._padded: list = []
+        self._frame_name = self._frame_E.scoped_name().to_string()
+        self._joint_velocity = DiffIkSystem.JointVelocityLimitConstraint(
+            DiffIkSystem.JointVelocityLimitConstraint.Config(
+                min_margin=cfg.joint_position_margin_rad, influence_margin=cfg.joint_position_influence_rad),
+            self._joint_limits(-self.joint_velocity_limit, self.joint_velocity_limit))
+        V_limit = np.concatenate([np.full(3, cfg.max_angular_speed_rad_s), np.full(3, cfg.max_linear_speed_m_s)])
+        recipe = DiffIkSystem.Recipe()
+        recipe.AddIngredient(DiffIkSystem.LeastSquaresCost(
+            DiffIkSystem.LeastSquaresCost.Config(cartesian_qp_weight=cfg.tracking_weight)))
+        recipe.AddIngredient(DiffIkSystem.JointCenteringCost(
+            DiffIkSystem.JointCenteringCost.Config(posture_gain=cfg.joint_centering_gain)))
+        recipe.AddIngredient(DiffIkSystem.CartesianVelocityLimitConstraint(
+            DiffIkSystem.CartesianVelocityLimitConstraint.Config(V_next_TG_limit=V_limit)))
+        recipe.AddIngredient(self._joint_velocity)
+        self._clearance_on = cfg.min_cell_clearance_m > 0
+        if self._clearance_on:
+            recipe.AddIngredient(DiffIkSystem.CollisionConstraint(DiffIkSystem.CollisionConstraint.Config(
+                safety_distance=cfg.min_cell_clearance_m, influence_distance=cfg.cell_clearance_within_m)))
+        # The time step is the horizon over which the collision constraint lets a gap close
+        # (the commands themselves go out every control period).
+        self._system = DiffIkSystem(
+            recipe=recipe, task_frame="world", collision_checker=self._checker, active_dof=DofMask(n, True),
+            time_step=cfg.clearance_approach_time_s, K_VX=1.0, Vd_TG_limit=SpatialVelocity(V_limit))
+        self._system_context = self._system.CreateDefaultContext()
 
         self._twist = self.DeclareVectorInputPort(TWIST_COMMAND, 6)
         self._q = self.DeclareVectorInputPort(POSITION_MEASURED, n)
@@ -144,6 +250,15 @@ class TwistToJointVelocity(LeafSystem):
     @property
     def control_plant(self):
         return self._plant
+
+    @property
+    def drake_system(self):
+        """The inner `DifferentialInverseKinematicsSystem`."""
+        return self._system
+
+    def _joint_limits(self, v_lower: np.ndarray, v_upper: np.ndarray) -> JointLimits:
+        n = len(v_lower)
+        return JointLimits(*self._position_limits, v_lower, v_upper, np.full(n, -np.inf), np.full(n, np.inf))
 
     def desired_spatial_velocity(self, twist_U: np.ndarray) -> np.ndarray:
         """[w_W; v_W] (Drake's spatial-velocity order) for a user-frame twist [v_U; w_U]."""
@@ -167,45 +282,98 @@ class TwistToJointVelocity(LeafSystem):
             self._plant.world_frame(), self._plant.world_frame())
         V = self.desired_spatial_velocity(twist_U)
         moving = np.linalg.norm(V) > 1e-9
-        self._params.set_joint_centering_gain(self._centering if moving else self._no_centering)
-        # A joint that the servo's lag carried past a (margin-shrunk) limit may not go
-        # further, but is not forced back at once: that would make the QP infeasible.
-        lower, upper = self.joint_position_limits
-        self._params.set_joint_position_limits((np.minimum(lower, q), np.maximum(upper, q)))
-        result = DoDifferentialInverseKinematics(q, v_current, V, J, self._params)
-        dv = self._cfg.joint_acceleration_rad_s2 * self._dt
-        if result.status == DifferentialInverseKinematicsStatus.kNoSolutionFound or result.joint_velocities is None:
-            # Stop at the acceleration limit rather than at once (never into the cell).
-            v_next, _ = self.keep_clear(q, v_current - np.clip(v_current, -dv, dv))
-            return v_next, FollowStatus.NO_SOLUTION, 0.0
-        v_next = np.asarray(result.joint_velocities).reshape(-1)
-        # The QP solver meets its bounds to a tolerance; the limits are hard, so clip.
-        v_next = np.clip(v_next, v_current - dv, v_current + dv)
-        v_next, held = self.keep_clear(q, v_next)
+        cfg = self._cfg
+        dv = cfg.joint_acceleration_rad_s2 * self._dt
+        v_qp, clearance = self._solve_qp(q, v_current, V, moving)
+        if v_qp is None:
+            # Come down at the acceleration limit rather than at once. Every gap to the cell
+            # was closing at most at (d - margin) / approach time, and the stop takes a
+            # fraction of that time, so the arm stays clear of the margin.
+            return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
+        v_next = np.clip(v_qp, v_current - dv, v_current + dv)
         v_next = np.clip(v_next, -self.joint_velocity_limit, self.joint_velocity_limit)
-        if not moving:
-            ratio = 1.0
-        else:
-            ratio = float(np.dot(J @ v_next, V) / np.dot(V, V))
+        held = False
+        if clearance is not None and clearance.size():
+            rates = clearance.jacobians() @ v_next
+            bounds = -np.maximum(clearance.distances() - cfg.min_cell_clearance_m, 0.0) / cfg.clearance_approach_time_s
+            held = bool(np.any((rates < 0) & (rates <= bounds + BINDING_ROW_TOLERANCE_M_S)))
+        ratio = float(np.dot(J @ v_next, V) / np.dot(V, V)) if moving else 1.0
         if invalid:
             status = FollowStatus.INVALID_INPUT
         elif held:
             status = FollowStatus.CLEARANCE
-        elif result.status == DifferentialInverseKinematicsStatus.kStuck:
+        elif moving and ratio < STUCK_RATIO:
             status = FollowStatus.STUCK
-        elif ratio < self._cfg.follow_ratio_threshold:
+        elif ratio < cfg.follow_ratio_threshold:
             status = FollowStatus.SLOWED
         else:
             status = FollowStatus.FOLLOWING
         return v_next, status, ratio
 
-    def keep_clear(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, bool]:
-        """v with what would drive the robot into the cell removed; (v, whether anything was)."""
-        if self._clearance is None:
-            return v, False
+    def _solve_qp(self, q, v_current, V, moving):
+        """Drake's answer (None when its QP failed) and the clearance it was given (or None)."""
+        self._joint_velocity.SetJointLimits(self._joint_limits(*self._velocity_bounds(q, v_current)))
+        clearance = self._hold_pairs_inside_margin(q) if self._clearance_on else None
+        system, context = self._system, self._system_context
+        system.get_input_port_position().FixValue(context, q)
+        system.get_input_port_nominal_posture().FixValue(context, self._q_nominal if moving else q)
+        bus = BusValue()
+        bus.Set(self._frame_name, AbstractValue.Make(SpatialVelocity(V[:3], V[3:])))
+        system.get_input_port_desired_cartesian_velocities().FixValue(context, bus)
+        try:
+            with _console_silenced():
+                v_qp = system.get_output_port_commanded_velocity().Eval(context).copy()
+        except RuntimeError:
+            return None, clearance  # limits the servo's lag made inconsistent: treated as no solution
+        if moving and not v_qp.any():
+            return None, clearance  # Drake's system answers exactly zero when its QP fails
+        return v_qp, clearance
+
+    def _velocity_bounds(self, q, v_current):
+        """The bounds to give Drake's JointVelocityLimitConstraint so that, after it cuts the
+        bound toward the nearer position limit by its factor s, the QP sees the speed limit
+        (cut by s) intersected with what the acceleration limit allows this period."""
         cfg = self._cfg
-        pairs = self._clearance.close_pairs(q, cfg.cell_clearance_within_m)
-        return hold_clearance(v, pairs, cfg.min_cell_clearance_m, cfg.clearance_approach_time_s)
+        v_max = self.joint_velocity_limit
+        dv = cfg.joint_acceleration_rad_s2 * self._dt
+        lo, hi = np.maximum(-v_max, v_current - dv), np.minimum(v_max, v_current + dv)
+        lower, upper = self._position_limits
+        to_lower, to_upper = q - lower, upper - q
+        near_upper = to_upper < to_lower  # the side Drake cuts (Drake's own test)
+        s = np.clip((np.minimum(to_lower, to_upper) - cfg.joint_position_margin_rad)
+                    / (cfg.joint_position_influence_rad - cfg.joint_position_margin_rad), 0.0, 1.0)
+        # The cut bound, but never so tight that slowing down at the acceleration limit is
+        # ruled out (a joint the servo's lag carried in too fast); the clip after the QP holds.
+        hi = np.where(near_upper, np.maximum(np.minimum(hi, v_max * s), lo + 1e-9), hi)
+        lo = np.where(near_upper, lo, np.minimum(np.maximum(lo, -v_max * s), hi - 1e-9))
+        # A positive cut bound is passed divided by s, so that Drake's cut gives it back; a
+        # bound of the other sign Drake only loosens toward 0 (the clip after the QP holds);
+        # at s = 0 Drake's bound is 0, so the other bound must allow 0.
+        cut = s > 0
+        safe = np.where(cut, s, 1.0)
+        hi_passed = np.where(near_upper & cut & (hi > 0), hi / safe, hi)
+        lo_passed = np.where(~near_upper & cut & (lo < 0), lo / safe, lo)
+        lo_passed = np.where(near_upper & ~cut, np.minimum(lo, 0.0), lo_passed)
+        hi_passed = np.where(~near_upper & ~cut, np.maximum(hi, 0.0), hi_passed)
+        return lo_passed, hi_passed
+
+    def _hold_pairs_inside_margin(self, q):
+        """Pads each robot-cell body pair already inside the margin up to it (held, not pushed);
+        returns the checker's clearance without that padding."""
+        cfg = self._cfg
+        for a, b in self._padded:
+            self._checker.SetPaddingBetween(a, b, 0.0)
+        self._padded = []
+        clearance = self._checker.CalcRobotClearance(q, cfg.cell_clearance_within_m)
+        closest: dict = {}
+        for i, j, d in zip(clearance.robot_indices(), clearance.other_indices(), clearance.distances()):
+            closest[(i, j)] = min(d, closest.get((i, j), np.inf))
+        for (i, j), d in closest.items():
+            if d < cfg.min_cell_clearance_m:
+                a, b = self._checker_plant.get_body(i), self._checker_plant.get_body(j)
+                self._checker.SetPaddingBetween(a, b, d - cfg.min_cell_clearance_m)
+                self._padded.append((a, b))
+        return clearance
 
     def _update(self, context, discrete_state):
         q = self._q.Eval(context)
@@ -218,3 +386,8 @@ class TwistToJointVelocity(LeafSystem):
         """X_WE of the workpiece centre at joint angles q (control plant kinematics)."""
         self._plant.SetPositions(self._plant_context, q)
         return self._frame_E.CalcPoseInWorld(self._plant_context)
+
+
+def make_twist_to_joint_velocity(scenario) -> TwistToJointVelocity:
+    """The scenario's differential-IK controller (every call site builds it here)."""
+    return TwistToJointVelocity(scenario.diff_ik, scenario.cell, scenario.robot.q0_rad, scenario.control_period_s)
