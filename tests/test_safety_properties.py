@@ -4,7 +4,9 @@ Generated streams (hypothesis) mix normal gestures with NaN/inf frames, huge
 values, frozen frames, dropped frames, sudden jumps, sign flips, long silences,
 and operator pause/resume at random times. Each runs through gesture source ->
 CchpPolicy -> MovingAverageDownsampler -> SafetySupervisor -> diff IK -> the
-simulated Gen3, from a posture with the part lifted into free space.
+simulated Gen3, from a posture with the part lifted into free space, or (one
+stream in four) with the part still seated in its mold, where the mold exit
+corridor decides what passes: there the part must never touch the mold.
 
 The number of streams: RTCOHAND_PROPERTY_EXAMPLES (default 500, so the suite stays near 20 min on a 2-core machine);
 the soak runs 10,000 with `RTCOHAND_PROPERTY_EXAMPLES=10000 pytest tests/test_safety_properties.py`.
@@ -24,6 +26,7 @@ from rtcohand_drake.systems.operator_panel import ScheduledOperatorPanel
 from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.systems.safety.supervisor import plausible_features
 from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.analysis.inspection import mold_clearance
 from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, POSITION_MEASURED, VELOCITY_COMMAND
 
@@ -102,6 +105,9 @@ def make_stream(segments, seed):
 
 @pytest.fixture(scope="module")
 def harness():
+    """{seated: (scenario, run, source, operator)}: the part lifted into free space, or in its mold."""
+    seated = load_scenario("inspection")
+    seated.safety.min_inspector_distance_m = 0.55
     scenario = load_scenario("inspection")
     scenario.safety.min_inspector_distance_m = 0.55
     # Start with the part lifted clear of the mold, in free space (the scripted lift).
@@ -111,6 +117,10 @@ def harness():
     q_free = lift.station.GetOutputPort(POSITION_MEASURED).Eval(
         lift.station.GetMyContextFromRoot(sim.get_context())).copy()
     scenario.robot.q0_rad = list(q_free)
+    return {False: _harness(scenario), True: _harness(seated)}
+
+
+def _harness(scenario):
     from pathlib import Path
 
     from rtcohand_drake.cell.robot_files import models_dir
@@ -135,9 +145,10 @@ pauses_strategy = st.lists(st.tuples(st.floats(0.0, DURATION_S), st.floats(0.2, 
 
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(segments=segments_strategy, pauses=pauses_strategy, seed=st.integers(0, 2**16))
-def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed):
-    scenario, run, source, operator = harness
+@given(segments=segments_strategy, pauses=pauses_strategy, seed=st.integers(0, 2**16),
+       in_mold=st.sampled_from([False, False, False, True]))
+def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed, in_mold):
+    scenario, run, source, operator = harness[in_mold]
     source.stream = make_stream(segments, seed)
     pause_windows = [(a, a + d) for a, d in pauses]
     operator.set_pauses(pause_windows)
@@ -209,3 +220,7 @@ def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed):
     seen = int(round(policy_context.get_discrete_state(5).get_value()[0]))
     assert seen in possible
     assert np.allclose(policy_context.get_discrete_state(4).get_value(), run.policy.sample_z(seen))
+    # 7. From the mold, the part leaves without touching its walls, whatever the stream asks.
+    if in_mold:
+        clearance, when = mold_clearance(scenario, t_q, q)
+        assert clearance > 0.0, (clearance, when)

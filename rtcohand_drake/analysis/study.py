@@ -110,8 +110,9 @@ def summarise(path: str) -> dict:
         "completion_s": float(log.completion_time) if log.completed else None,
         "faces": int(log.faces_inspected),
         "face_times_s": sorted(t for t in result.inspected_at.values() if np.isfinite(t)),
-        "median_speed_m_s": float(np.median(speed[moving])) if moving.any() else 0.0,
-        "median_turn_rad_s": float(np.median(turn[moving])) if moving.any() else 0.0,
+        # Each over the samples where that part of the command moves at all.
+        "median_speed_m_s": float(np.median(speed[speed > 0.005])) if (speed > 0.005).any() else 0.0,
+        "median_turn_rad_s": float(np.median(turn[turn > 0.02])) if (turn > 0.02).any() else 0.0,
         "moving_share": float(moving.mean()) if len(moving) else 0.0,
         "ik_no_solution": kinds.get("ik_no_solution", 0),
     }
@@ -128,14 +129,14 @@ def ratios(results: dict, condition: str) -> list[float]:
 
 
 def markdown(results: dict, conditions: Sequence[str]) -> str:
-    lines = ["| person | " + " | ".join(f"{c}: time (faces), speed" for c in conditions) + " |",
+    lines = ["| person | " + " | ".join(f"{c}: time (faces), median v / w" for c in conditions) + " |",
              "|---|" + "---|" * len(conditions)]
     for person, runs in results.items():
         cells = []
         for c in conditions:
             r = runs.get(c)
             if r is None:
-                cells.append("run failed")
+                cells.append("-")
                 continue
             time = f"{r['completion_s']:.1f} s" if r["completed"] else "not done"
             cells.append(f"{time} ({r['faces']}/6), {r['median_speed_m_s']:.3f} m/s / {r['median_turn_rad_s']:.2f} rad/s")
@@ -194,11 +195,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=Path("docs/results/study"))
+    p.add_argument("--logs", type=Path, default=None, help="where the run logs go (default: OUT/logs)")
+    p.add_argument("--summarise-only", action="store_true",
+                   help="run nothing: summarise the run logs already in the logs folder (people with any)")
     args = p.parse_args(argv)
-    logs = args.out / "logs"
+    logs = args.logs or args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
+    args.out.mkdir(parents=True, exist_ok=True)
     jobs = [(pop, user, c) for pop in args.populations for user in args.users for c in args.conditions]
     results: dict = {f"p{pop}/{user}": {} for pop in args.populations for user in args.users}
+    if args.summarise_only:
+        for pop, user, c in jobs:
+            path = logs / f"p{pop}_{user}_{c}.h5"
+            if path.is_file():
+                results[f"p{pop}/{user}"][c] = summarise(str(path))
+        results = {person: runs for person, runs in results.items() if runs}
+        return _report(results, args)
     with ProcessPoolExecutor(args.jobs) as pool:
         futures = {pool.submit(run_condition, pop, user, c, str(logs), args.seed): (pop, user, c)
                    for pop, user, c in jobs}
@@ -211,6 +223,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             except Exception as err:  # one failed run is reported, not fatal
                 state = f"failed: {err}"
             print(f"[{n}/{len(jobs)}] population {pop} {user} {c}: {state}", flush=True)
+    return _report(results, args)
+
+
+def _report(results: dict, args) -> int:
     table = markdown(results, args.conditions)
     print(table)
     (args.out / "study.md").write_text(table)
