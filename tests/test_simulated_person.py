@@ -15,6 +15,7 @@ from rtcohand_drake.data.hand_features import FINGER_CHAINS
 from rtcohand_drake.analysis.inspection import measure_inspection
 from rtcohand_drake.stations.kinematic_workpiece import KinematicWorkpiece
 from rtcohand_drake.systems.gestures.simulated_person import (
+    PersonConfig,
     SimulatedPerson,
     make_builtin_person,
     population_user_ids,
@@ -150,19 +151,32 @@ def test_lift_gesture_is_that_users_plus_tz(scenario, eye_W, user_id):
     assert other > 1.3 * distance[order[0]]
 
 
-def test_task_progresses_lift_present_inspect(scenario, eye_W):
+def test_task_progresses_lift_inspect(scenario, eye_W):
+    """By default the part is shown where the lift ends: the presentation is reached with it."""
     op, _ = _operator(scenario, eye_W, OUT_SAMPLE[0])
     times, poses, phases, state = _run_kinematic_loop(scenario, op, 120.0)
-    assert phases == ["lift", "present", "inspect", "done"]
+    assert phases == ["lift", "inspect", "done"]
     assert state.seen.all()
     result = measure_inspection(times, poses, eye_W)
     assert result.completed and result.faces_inspected == 6 and result.completion_time < 120.0
     # Straight up out of the mold: nothing sideways until the part is clear of it.
     low = poses[:, 2] < MOLD_POSE_W[2] + 0.06
     assert np.abs(poses[low, :2] - MOLD_POSE_W[:2]).max() < 1e-6
-    # The presentation point is in the workspace box and well clear of the glass (world y = 0.52).
+    # Shown straight above the mold, in the workspace box and well clear of the glass (world y = 0.52).
     final = poses[-1, :3]
     assert scenario.workspace.contains(final) and final[1] < 0.35
+    assert np.linalg.norm(final[:2] - MOLD_POSE_W[:2]) < PersonConfig().drift_tolerance_m
+
+
+def test_a_presentation_point_elsewhere_is_reached_before_the_turns(scenario, eye_W):
+    profile, _, _ = _user(OUT_SAMPLE[0])
+    point_W = (0.25, 0.15, 0.50)
+    op = SimulatedPerson(profile, scenario.cell.user_frame.to_rigid_transform(), eye_W,
+                         PersonConfig(presentation_xyz_W=point_W), rate_hz=scenario.policy.rate_hz)
+    times, poses, phases, state = _run_kinematic_loop(scenario, op, 25.0)
+    assert phases[:3] == ["lift", "present", "inspect"]
+    entered = min(k for k, p in enumerate(poses) if np.linalg.norm(p[:3] - point_W) < PersonConfig().presentation_tolerance_m)
+    assert times[entered] < 25.0
 
 
 def test_deterministic_for_a_seed(scenario, eye_W):
