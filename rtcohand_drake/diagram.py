@@ -104,8 +104,11 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         "safety_status": log(supervisor.GetOutputPort(SAFETY_STATUS), scenario.safety.period_s),
         "follow_status": log(controller.GetOutputPort(FOLLOW_STATUS), scenario.control_period_s),
     }
+    policy_period = 1.0 / scenario.policy.rate_hz
+    keypoints = source.GetOutputPort(KEYPOINTS) if source.HasOutputPort(KEYPOINTS) else _nan_keypoints(builder)
+    loggers["gesture_status"] = log(source.GetOutputPort(GESTURE_STATUS), policy_period)
+    loggers["gesture_keypoints"] = log(keypoints, policy_period)
     if policy is not None:
-        policy_period = 1.0 / scenario.policy.rate_hz
         loggers["policy_mean"] = log(policy.GetOutputPort(POLICY_MEAN), policy_period)
         loggers["policy_std"] = log(policy.GetOutputPort(POLICY_STD), policy_period)
     visualizer = overlay = None
@@ -116,8 +119,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
             builder, station.GetOutputPort(QUERY_OBJECT), meshcat,
             MeshcatVisualizerParams(role=Role.kIllustration, prefix="cell"))
         overlay = builder.AddNamedSystem("overlay", RunOverlay(meshcat, scenario.cell.user_frame.to_rigid_transform()))
-        connect(source.GetOutputPort(KEYPOINTS) if source.HasOutputPort(KEYPOINTS)
-                else _nan_keypoints(builder), overlay.GetInputPort(KEYPOINTS))
+        connect(keypoints, overlay.GetInputPort(KEYPOINTS))
         connect(supervisor.GetOutputPort(TWIST_COMMAND), overlay.GetInputPort(TWIST_COMMAND))
         connect(supervisor.GetOutputPort(SAFETY_STATUS), overlay.GetInputPort(SAFETY_STATUS))
         connect(station.GetOutputPort(WORKPIECE_POSE), overlay.GetInputPort(WORKPIECE_POSE))
@@ -160,6 +162,9 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
     if "policy_mean" in run.loggers:
         log.policy_time, log.policy_mean = _log_arrays(run.loggers["policy_mean"], root_context)
         _, log.policy_std = _log_arrays(run.loggers["policy_std"], root_context)
+    log.gesture_time, status = _log_arrays(run.loggers["gesture_status"], root_context)
+    log.gesture_valid, log.gesture_frame_time = status[:, 0], status[:, 1]
+    _, log.gesture_keypoints = _log_arrays(run.loggers["gesture_keypoints"], root_context)
 
     t, status = _log_arrays(run.loggers["safety_status"], root_context)
     modes = status[:, 0].round().astype(int)
