@@ -172,7 +172,10 @@ def _check_values(s: Scenario, source: str) -> None:
     h = s.hand_sign
     need(h.hold_s > 0 and h.period_s > 0, "hand_sign.hold_s and hand_sign.period_s must be > 0")
     need(0 < h.fist_below < h.open_above, "hand_sign: need 0 < fist_below < open_above")
-    need(h.max_wrist_speed_m_s > 0, "hand_sign.max_wrist_speed_m_s must be > 0")
+    need(h.max_drift_m > 0, "hand_sign.max_drift_m must be > 0")
+    need(0 < h.thumb_up_within_deg and h.thumb_hysteresis_deg >= 0
+         and h.thumb_up_within_deg + h.thumb_hysteresis_deg < 90,
+         "hand_sign: need 0 < thumb_up_within_deg, thumb_hysteresis_deg >= 0, their sum < 90")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 

@@ -108,11 +108,17 @@ def test_calibration_file(tmp_path):
         load_calibration(tmp_path / "none.yaml")
 
 
+# A drawn hand waves, makes the pause sign (a thumbs-up) twice, waves, and leaves the picture.
+# The drawing jumps from one pose to the next, where the tracker may lose it for a frame, so
+# validity is checked while it waves first.
+SCRIPT = [("wave", 2.5), ("thumbs_up", 1.0), ("wave", 1.0), ("thumbs_up", 1.0), ("wave", 0.5), ("gone", 1.2)]
+WAVE_S, SIGN_S, LEAVES_S = 2.5, (2.5, 4.5), 6.0
+
+
 @pytest.fixture(scope="module")
 def hand_video(tmp_path_factory):
-    """2.5 s of a drawn hand moving side to side, then 1.5 s without it (it has left)."""
     path = tmp_path_factory.mktemp("video") / "drawn_hand.avi"
-    assert write_video(path, (f for f, _ in drawn_hand_frames(CALIBRATION, 2.5, 1.5))) == 120
+    assert write_video(path, (f for f, _ in drawn_hand_frames(CALIBRATION, SCRIPT))) == 216
     return path
 
 
@@ -138,19 +144,27 @@ def test_drawn_hand_video_through_the_whole_diagram(tmp_path, hand_video, contex
     log = read_run_log(log_path)
     assert log.gesture_source == "camera"
     t, valid, kp = log.gesture_time, log.gesture_valid, log.gesture_keypoints
-    assert kp.shape == (len(t), 63) and len(t) >= 40  # the run ends with the video (4 s at 10 Hz)
-    in_view = (t >= 0.3) & (t < 2.5)
-    assert valid[in_view].mean() >= 0.9
-    assert np.all(np.isfinite(kp[in_view & (valid > 0.5)]))
-    # The wrist moves side to side along X of U, 3 cm either way, as drawn.
-    x = kp[in_view & (valid > 0.5), 0]
+    assert kp.shape == (len(t), 63) and len(t) >= 72  # the run ends with the video (7.2 s at 10 Hz)
+    waving = (t >= 0.3) & (t < WAVE_S)
+    assert valid[waving].mean() >= 0.9
+    in_view = (t >= 0.3) & (t < LEAVES_S)
+    assert valid[in_view].mean() >= 0.8 and np.all(np.isfinite(kp[in_view & (valid > 0.5)]))
+    # While it waves, the wrist moves side to side along X of U, 3 cm either way, as drawn.
+    x = kp[waving & (valid > 0.5), 0]
     assert 0.03 < x.max() - x.min() < 0.09
-    gone = t >= 2.6
+    gone = t >= LEAVES_S + 0.1
     assert np.all(valid[gone] == 0) and np.all(np.isnan(kp[gone]))
     watchdogs = [e.time for e in log.events if e.kind == "watchdog"]
-    assert not [w for w in watchdogs if 0.5 < w < 2.5]
+    assert not [w for w in watchdogs if 0.5 < w < WAVE_S]
     # The watchdog fires within one policy period of the first frame without the hand.
-    assert [w for w in watchdogs if 2.5 <= w <= 2.5 + 0.1 + 0.05]
+    assert [w for w in watchdogs if LEAVES_S <= w <= LEAVES_S + 0.15]
+    # The thumbs-up paused once held 0.5 s; the second resumed.
+    pauses = [e for e in log.events if e.kind == "pause"]
+    resumes = [e for e in log.events if e.kind == "resume" and "source" in e.detail]
+    assert len(pauses) == 1 and SIGN_S[0] + 0.5 <= pauses[0].time <= SIGN_S[0] + 0.75 and "source: hand sign" in pauses[0].detail
+    assert len(resumes) == 1 and SIGN_S[1] + 0.5 <= resumes[0].time <= SIGN_S[1] + 0.75 and "source: hand sign" in resumes[0].detail
+    paused = (log.command_time > pauses[0].time + 0.6) & (log.command_time < resumes[0].time)
+    assert np.abs(log.command_twist[paused]).max() < 1e-9  # at rest while paused
     with h5py.File(log_path) as f:
         assert {"time", "valid", "keypoints"} <= set(f["gesture"])
 
@@ -160,11 +174,11 @@ def test_video_stream_ends_frozen(hand_video):
 
     tracker = VideoFileTracker(hand_video, HandPipeline(CALIBRATION))
     try:
-        assert tracker.fps == pytest.approx(30.0) and tracker.duration_s == pytest.approx(4.0)
+        assert tracker.fps == pytest.approx(30.0) and tracker.duration_s == pytest.approx(7.2)
         keypoints, t = tracker.latest(0.5)
         assert keypoints.shape == (21, 3) and t == pytest.approx(0.5)
-        assert tracker.latest(3.0) == (None, pytest.approx(3.0))
-        after = [tracker.latest(s) for s in (4.0, 4.1, 5.0)]
+        assert tracker.latest(6.5) == (None, pytest.approx(6.5))
+        after = [tracker.latest(s) for s in (7.2, 7.3, 8.0)]
         assert all(k is None and ft == after[0][1] for k, ft in after)  # closed: the frame time stops
         assert tracker.latest(0.2)[0] is not None  # an earlier time rewinds the file
     finally:

@@ -92,26 +92,45 @@ def project(points_C: np.ndarray, camera_matrix: np.ndarray) -> np.ndarray:
     return uvw[:, :2] / uvw[:, 2:3]
 
 
-def drawn_hand_frames(calibration, seconds_in_view: float, seconds_after: float, fps: float = 30.0,
-                      amplitude_m: float = 0.03, period_s: float = 2.0, wrist_U=(0.0, 0.2, -0.02)):
-    """Frames (BGR) of a drawn open hand moving side to side in front of the camera, then gone.
+def thumbs_up_U(wrist_U=(0.0, 0.0, 0.0), scale: float = 1.0) -> np.ndarray:
+    """Keypoints (21, 3), metres, U: a right hand in a thumbs-up, knuckles to the person's left."""
+    local = hand_keypoints_local(np.ones((1, 4)), np.zeros((1, 4)), np.deg2rad([[75.0, 5.0, 0.0, 0.0]]), scale)[0]
+    R_UH = np.column_stack([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # thumb (-X of H) up
+    return (local - local[0]) @ R_UH.T + np.asarray(wrist_U, float)
 
-    For `seconds_in_view` the wrist moves along X of U, `amplitude_m` either side
-    of `wrist_U`, with period `period_s`; then for `seconds_after` only the
-    background is seen (the hand has left). Yields (frame, keypoints_U or None).
+
+def drawn_hand_frames(calibration, script=(("wave", 2.5), ("gone", 1.5)), fps: float = 30.0,
+                      amplitude_m: float = 0.03, period_s: float = 2.0, wrist_U=(0.0, 0.2, -0.02)):
+    """Frames (BGR) of a drawn hand in front of the camera, following `script`.
+
+    `script` is a list of (what, seconds): "wave", an open hand whose wrist moves
+    along X of U, `amplitude_m` either side of `wrist_U` with period `period_s`;
+    "thumbs_up", the pause sign held still; "gone", the background alone (the
+    hand has left). Poses change from one frame to the next (MediaPipe may lose
+    the hand for a frame there). Yields (frame, keypoints_U or None).
     """
     w, h = calibration.image_size_px
     K = calibration.camera_matrix()
     R_UC, p_UC = calibration.R_UC(), calibration.p_UC()
     empty = background(w, h)
-    n_in, n_out = int(round(seconds_in_view * fps)), int(round(seconds_after * fps))
-    for i in range(n_in + n_out):
-        if i >= n_in:
-            yield empty.copy(), None
-            continue
-        x = amplitude_m * np.sin(2 * np.pi * (i / fps) / period_s)
-        keypoints_U = open_hand_U(np.asarray(wrist_U, float) + [x, 0.0, 0.0], curl=0.1)
-        yield draw_hand(empty.copy(), project((keypoints_U - p_UC) @ R_UC, K)), keypoints_U
+    wrist = np.asarray(wrist_U, float)
+    i = 0
+    for what, seconds in script:
+        for _ in range(int(round(seconds * fps))):
+            if what == "gone":
+                keypoints_U = None
+            elif what == "thumbs_up":
+                keypoints_U = thumbs_up_U(wrist + [0.0, 0.0, 0.04])
+            elif what == "wave":
+                x = amplitude_m * np.sin(2 * np.pi * (i / fps) / period_s)
+                keypoints_U = open_hand_U(wrist + [x, 0.0, 0.0], curl=0.1)
+            else:
+                raise ValueError(f"unknown script step {what!r}")
+            i += 1
+            if keypoints_U is None:
+                yield empty.copy(), None
+            else:
+                yield draw_hand(empty.copy(), project((keypoints_U - p_UC) @ R_UC, K)), keypoints_U
 
 
 def write_video(path, frames, fps: float = 30.0) -> int:
