@@ -193,6 +193,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if station is not None:
             station.close()  # Stop(), then close the session, on every exit path
+        if hasattr(run.source, "close"):
+            run.source.close()  # a camera source releases its camera and tracker
     wall = time.perf_counter() - wall_start
     root = simulator.get_context()
     sim_time = root.get_time()

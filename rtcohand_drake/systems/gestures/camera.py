@@ -49,6 +49,12 @@ class CameraGestureSource(KeypointGestureSource):
         keypoints, frame_time = self.tracker.latest(context.get_time())
         return (NAN_HAND if keypoints is None else keypoints), float(frame_time)
 
+    def close(self) -> None:
+        """Releases the camera or file and the tracker (after the run)."""
+        close = getattr(self.tracker, "close", None)
+        if close is not None:
+            close()
+
 
 def make_tracker(scenario, camera: int | None = None, video=None, calibration_file=None, warn=None):
     """The tracker for `--camera N` or `--video PATH` (exactly one), with the calibration."""
