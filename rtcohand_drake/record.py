@@ -3,6 +3,7 @@
     python -m rtcohand_drake.record --out ME.h5 --user ME
         [--camera N | --video PATH | --simulated-user uXX [--population-seed N]]
         [--camera-calibration FILE] [--no-meshcat] [--only Tx+,Rz-] [--seed N] [--scenario S]
+        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]]
 
 The protocol is the paper's: for each target motion Meshcat shows a cue, a
 workpiece moving the way the person should ask for, after a countdown; the
@@ -19,6 +20,13 @@ Clips are written per the gesture dataset contract, the person as the user
 (group "out-sample", split "train"). Then the reading check
 (`rtcohand_drake.analysis.context_reading`) runs on the new file and names
 the motions read poorly, to record again with `--only`.
+
+`--labels aruco` is the paper's human-human protocol instead: a handler
+moves an object carrying an ArUco marker in front of the camera as the
+person gestures (the cue still shows the handler what to do); the marker's
+pose (`rtcohand_drake.vision.aruco`) in each frame, in U, differentiated and
+lightly smoothed, is the label (`label_source = "aruco"`, no shift: the
+handler follows the gesture as the training data's handler did).
 
 Where the gestures come from:
 - `--camera N`: a webcam, live (`rtcohand_drake.vision.capture.LiveCameraTracker`);
@@ -170,8 +178,11 @@ def record_simulated(user_id: str, motions_list, population_seed: int, seed: int
     return clips
 
 
-def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: bool, view=None):
+def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: bool, view=None,
+                   labels: str = LABEL_SOURCE):
     """Clips from a tracker: countdown, then the cue for `clip_s` while the keypoints are kept.
+
+    `labels`: "cue" (the cue's twist) or "aruco" (the marked object's, `tracker.marker()`).
 
     `live`: a camera, paced by the wall clock; otherwise a video file, whose frames follow the
     same timeline (countdown then clip, back to back from its start).
@@ -196,7 +207,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
                 view.show("countdown", start)
             wait_until(t_session + protocol.countdown_s - n + 1)
         t0 = t_session + protocol.countdown_s
-        times, frames, seen = [], [], None
+        times, frames, markers, seen = [], [], [], None
         for i in range(int(round(protocol.clip_s / step))):
             t = t0 + i * step
             wait_until(t)
@@ -206,6 +217,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
             seen = frame_time
             times.append(frame_time - t0)
             frames.append(np.full((21, 3), np.nan) if keypoints is None else keypoints)
+            markers.append(tracker.marker() if labels == "aruco" else None)
             if view is not None:
                 cue_so_far = cue_twist(motions, np.arange(0.0, frame_time - t0 + 1e-9, step), protocol)
                 view.show("record", integrate_pose(start, cue_so_far, step)[-1])
@@ -213,11 +225,15 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
         times = np.asarray(times)
         keep = np.concatenate([[True], np.diff(times) > 0]) if len(times) else np.zeros(0, bool)
         times, frames = times[keep], np.asarray(frames)[keep]
+        markers = [m for m, k in zip(markers, keep) if k]
         if len(times) < 2 or np.all(np.isnan(frames)):
             print(f"  {name}: no hand seen; the clip is left out", flush=True)
             continue
         fps = 1.0 / float(np.median(np.diff(times)))
-        cue = cue_twist(motions, times, protocol)
+        cue = cue_twist(motions, times, protocol) if labels == "cue" else marker_labels(times, markers)
+        if cue is None:
+            print(f"  {name}: the marker was lost in most frames; the clip is left out", flush=True)
+            continue
         clips.append(Clip(user=user, clip_id=f"{k:02d}_{name}", group="out-sample", split="train",
                           active_dims=np.array(sorted(d for d, _ in motions), np.int64), fps=max(fps, 5.0),
                           keypoints=frames.astype(np.float32), object_velocity=cue.astype(np.float32),
@@ -240,15 +256,32 @@ def align_labels(clips, delay_s: float):
     return out
 
 
-def write_recording(path: Path, clips, protocol: Protocol, source: str) -> None:
+def marker_labels(times: np.ndarray, poses, smooth_frames: int = 5) -> np.ndarray | None:
+    """Twists (N, 6) of the marked object from its poses [(R_UM, p_UM) or None]; lost frames filled
+    in from their neighbours, a centred moving average over `smooth_frames`. None if mostly lost."""
+    from rtcohand_drake.vision.aruco import twist_in_user_frame
+
+    R = np.stack([np.full((3, 3), np.nan) if q is None else q[0] for q in poses])
+    p = np.stack([np.full(3, np.nan) if q is None else q[1] for q in poses])
+    twist = twist_in_user_frame(times, R, p)
+    ok = np.all(np.isfinite(twist), axis=1)
+    if ok.mean() < 0.5:
+        return None
+    filled = np.stack([np.interp(times, times[ok], twist[ok, d]) for d in range(6)], axis=1)
+    kernel = np.ones(smooth_frames) / smooth_frames
+    padded = np.pad(filled, ((smooth_frames // 2, smooth_frames // 2), (0, 0)), mode="edge")
+    return np.stack([np.convolve(padded[:, d], kernel, mode="valid") for d in range(6)], axis=1)
+
+
+def write_recording(path: Path, clips, protocol: Protocol, source: str, labels: str = LABEL_SOURCE) -> None:
     import h5py
 
     from rtcohand_drake.data.dataset import write_dataset
 
     write_dataset(path, clips)
     with h5py.File(path, "r+") as f:
-        f.attrs["label_source"] = LABEL_SOURCE
-        f.attrs["label_delay_s"] = protocol.response_delay_s + protocol.label_lag_s
+        f.attrs["label_source"] = labels
+        f.attrs["label_delay_s"] = protocol.response_delay_s + protocol.label_lag_s if labels == "cue" else 0.0
         f.attrs["recorder"] = json.dumps({"source": source, "protocol": dc.asdict(protocol)})
 
 
@@ -275,6 +308,10 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-meshcat", action="store_true", help="no cue in Meshcat (headless)")
     p.add_argument("--no-check", action="store_true", help="skip the reading check at the end")
     p.add_argument("--seed", type=int, default=0, help="seeds the simulated person's responses")
+    p.add_argument("--labels", choices=("cue", "aruco"), default="cue",
+                   help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")
+    p.add_argument("--marker-length-m", type=float, default=0.05, help="with --labels aruco: the marker's side")
+    p.add_argument("--marker-id", type=int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
     return p
 
 
@@ -287,6 +324,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     protocol = Protocol()
     print(f"recording {len(motions_list)} clips for {args.user}: "
           + ", ".join(motion_name(m) for m in motions_list), flush=True)
+    if args.labels == "aruco" and args.simulated_user is not None:
+        raise InputError("command line: --labels aruco needs --camera or --video (a handler's marked object)")
+    if not args.marker_length_m > 0:
+        raise InputError(f"command line: --marker-length-m must be > 0, got {args.marker_length_m}")
     if args.simulated_user is not None:
         if args.camera_calibration is not None:
             raise InputError("command line: --camera-calibration goes with --camera or --video")
@@ -304,20 +345,28 @@ def main(argv: Sequence[str] | None = None) -> int:
             meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
             print(f"Meshcat: {meshcat.web_url()} (the cue)", flush=True)
             view = CueView(meshcat)
-        tracker = make_tracker(scenario, args.camera, args.video, args.camera_calibration)
+        marker = None
+        if args.labels == "aruco":
+            from rtcohand_drake.vision.aruco import MarkerConfig, MarkerTracker
+
+            marker = MarkerTracker(MarkerConfig(marker_length_m=args.marker_length_m, marker_id=args.marker_id))
+        tracker = make_tracker(scenario, args.camera, args.video, args.camera_calibration, marker_tracker=marker)
         try:
             clips = record_tracked(tracker, motions_list, protocol, args.user, live=args.camera is not None,
-                                   view=view)
+                                   view=view, labels=args.labels)
         finally:
             tracker.close()
         source = f"camera {args.camera}" if args.camera is not None else f"video {args.video}"
     if not clips:
         raise InputError(f"{args.out}: no clip recorded (no hand was seen)")
-    delay = protocol.response_delay_s + protocol.label_lag_s
-    clips = align_labels(clips, delay)
-    write_recording(args.out, clips, protocol, source)
-    print(f"wrote {len(clips)} clips of {args.user} to {args.out} (labels: the cue's twist, {delay:.2f} s later)",
-          flush=True)
+    if args.labels == "cue":
+        delay = protocol.response_delay_s + protocol.label_lag_s
+        clips = align_labels(clips, delay)
+        what = f"the cue's twist, {delay:.2f} s later"
+    else:
+        what = "the ArUco-marked object's twist"
+    write_recording(args.out, clips, protocol, source, args.labels)
+    print(f"wrote {len(clips)} clips of {args.user} to {args.out} (labels: {what})", flush=True)
     if args.no_check:
         return 0
     from rtcohand_drake.analysis import context_reading

@@ -64,3 +64,49 @@ def test_bad_arguments_are_one_line(tmp_path):
         main(["--out", str(tmp_path / "no" / "x.h5"), "--user", "ME", "--simulated-user", "u10"])
     with pytest.raises(InputError, match="command line"):
         main(["--out", str(tmp_path / "x.h5"), "--user", "ME"])  # no gesture source
+
+
+class _FakeCamera:
+    """A tracker with a hand that waves and a marked object moving at a known twist, 30 frames a second."""
+
+    fps = 30.0
+    V, W = np.array([0.05, 0.0, -0.02]), np.array([0.0, 0.0, 0.3])
+
+    def __init__(self):
+        self._t = None
+
+    def latest(self, now_s):
+        from rtcohand_drake.vision.drawn_hand import open_hand_U
+
+        self._t = np.floor(now_s * self.fps + 1e-6) / self.fps
+        return open_hand_U((0.02 * np.sin(3 * self._t), 0.2, 0.0)), self._t
+
+    def marker(self):
+        import cv2
+
+        if int(round(self._t * self.fps)) % 7 == 3:
+            return None  # the marker is missed now and then
+        return cv2.Rodrigues(self.W * self._t)[0], self.V * self._t
+
+
+@pytest.mark.parametrize("labels", ["cue", "aruco"])
+def test_tracked_session_labels(labels):
+    from rtcohand_drake.record import record_tracked
+
+    protocol = Protocol(countdown_s=1.0, clip_s=3.0)
+    clips = record_tracked(_FakeCamera(), [((0, 1),), ((5, -1),)], protocol, "ME", live=False, labels=labels)
+    assert [c.clip_id for c in clips] == ["00_Tx+", "01_Rz-"]
+    for clip in clips:
+        assert clip.num_frames == 90 and clip.fps == pytest.approx(30.0)
+        assert np.all(np.isfinite(clip.keypoints)) and np.all(np.isfinite(clip.object_velocity))
+    if labels == "cue":
+        assert clips[0].object_velocity[:, 0].max() == pytest.approx(protocol.cue_speed_m_s, rel=1e-3)
+        assert clips[1].object_velocity[:, 5].min() == pytest.approx(-protocol.cue_rate_rad_s, rel=1e-3)
+    else:  # the marked object's own twist, whatever the cue
+        middle = clips[0].object_velocity[10:-10]
+        assert np.allclose(middle, np.r_[_FakeCamera.V, _FakeCamera.W], atol=1e-6)
+
+
+def test_aruco_labels_need_a_camera(tmp_path):
+    with pytest.raises(InputError, match="--labels aruco needs"):
+        main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--labels", "aruco"])

@@ -17,7 +17,10 @@ when no hand is seen, and the time of its frame on the diagram's clock.
   leaves the last time in place (frozen), a closed one too.
 
 `HandPipeline` is the shared part: landmarks (MediaPipe), the hand to follow,
-and the metric fit into U. It records how long each frame took.
+and the metric fit into U. It records how long each frame took. Given a
+`MarkerTracker` it also finds an ArUco-marked object's pose in U in each
+frame (the recorder's `--labels aruco`): `marker()` on a tracker gives the
+pose seen in the frame `latest` last returned.
 """
 
 from __future__ import annotations
@@ -39,10 +42,13 @@ from rtcohand_drake.vision.landmarker import HandLandmarker
 class HandPipeline:
     """One frame (BGR) to the followed hand's keypoints (21, 3) in U, or None."""
 
-    def __init__(self, calibration: CameraCalibration, config: Camera | None = None, video: bool = True):
+    def __init__(self, calibration: CameraCalibration, config: Camera | None = None, video: bool = True,
+                 marker_tracker=None):
         self.calibration = calibration
         self.config = config or Camera()
         self.landmarker = HandLandmarker(self.config, video=video)
+        self.marker_tracker = marker_tracker
+        self.last_marker = None  # (R_UM, p_UM) in the last frame processed, or None
         self.processing_s: list[float] = []  # per frame: frame in hand -> keypoints in U
 
     def process(self, frame_bgr: np.ndarray, time_s: float) -> np.ndarray | None:
@@ -51,6 +57,12 @@ class HandPipeline:
         h, w = frame_bgr.shape[:2]
         keypoints = None if hand is None else keypoints_in_user_frame(hand, self.calibration, (w, h))
         self.processing_s.append(time.perf_counter() - start)
+        if self.marker_tracker is not None:
+            found = self.marker_tracker.pose_in_camera(frame_bgr, self.calibration.camera_matrix((w, h)),
+                                                       self.calibration.distortion_coefficients())
+            R_UC = self.calibration.R_UC()
+            self.last_marker = None if found is None else (R_UC @ found[0],
+                                                           self.calibration.to_user_frame(found[1][None])[0])
         return keypoints
 
     def close(self) -> None:
@@ -86,7 +98,12 @@ class VideoFileTracker:
         self._capture = None
         self._index = -1  # the frame last read
         self._result: tuple[np.ndarray | None, float] = (None, -math.inf)
+        self._marker = None
         self._ended = False
+
+    def marker(self):
+        """The marked object's pose (R_UM, p_UM) in the frame `latest` last returned, or None."""
+        return self._marker
 
     @property
     def duration_s(self) -> float | None:
@@ -115,11 +132,13 @@ class VideoFileTracker:
         self._index += 1
         t = self._index / self.fps
         self._result = (self._pipeline.process(frame, t), t)
+        self._marker = self._pipeline.last_marker
         return self._result
 
     def _end(self) -> tuple[np.ndarray | None, float]:
         self._ended = True
         self._result = (None, self._result[1])  # the frame time stays: the stream is closed
+        self._marker = None
         return self._result
 
     def close(self) -> None:
@@ -136,6 +155,7 @@ class LiveCameraTracker:
         self._capture = _open(int(device), f"camera {device}")
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray | None, float] = (None, -math.inf)  # keypoints, capture time (monotonic)
+        self._marker = None  # the marked object's pose in that frame
         self._offset: float | None = None
         self._stop = threading.Event()
         self.closed = False
@@ -155,9 +175,15 @@ class LiveCameraTracker:
             keypoints = self._pipeline.process(frame, stamp)
             with self._lock:
                 self._latest = (keypoints, stamp)
+                self._marker = self._pipeline.last_marker
         with self._lock:
             self._latest = (None, self._latest[1])
         self.closed = True
+
+    def marker(self):
+        """The marked object's pose (R_UM, p_UM) in the newest frame, or None."""
+        with self._lock:
+            return self._marker
 
     def latest(self, now_s: float) -> tuple[np.ndarray | None, float]:
         if self._offset is None:

@@ -56,8 +56,10 @@ class CameraGestureSource(KeypointGestureSource):
             close()
 
 
-def make_tracker(scenario, camera: int | None = None, video=None, calibration_file=None, warn=None):
-    """The tracker for `--camera N` or `--video PATH` (exactly one), with the calibration."""
+def make_tracker(scenario, camera: int | None = None, video=None, calibration_file=None, warn=None,
+                 marker_tracker=None):
+    """The tracker for `--camera N` or `--video PATH` (exactly one), with the calibration (and an
+    ArUco `marker_tracker` for the recorder's marker labels)."""
     from rtcohand_drake.vision.calibration import DEFAULT_WARNING, CameraCalibration, load_calibration
     from rtcohand_drake.vision.capture import HandPipeline, LiveCameraTracker, VideoFileTracker
 
@@ -66,7 +68,7 @@ def make_tracker(scenario, camera: int | None = None, video=None, calibration_fi
     else:
         calibration = CameraCalibration()
         (warn or (lambda m: print(f"warning: {m}", file=sys.stderr)))(DEFAULT_WARNING)
-    pipeline = HandPipeline(calibration, scenario.camera, video=True)
+    pipeline = HandPipeline(calibration, scenario.camera, video=True, marker_tracker=marker_tracker)
     if video is not None:
         return VideoFileTracker(video, pipeline)
     return LiveCameraTracker(camera, pipeline)
