@@ -66,3 +66,46 @@ def test_twist_from_poses():
     p[10] = np.nan
     twist = twist_in_user_frame(t, R, p)
     assert np.all(np.isnan(twist[[9, 11]])) and np.all(np.isfinite(twist[12]))
+
+
+@pytest.mark.parametrize("marker_rpy_deg", [[60.0, 0.0, 160.0], [70.0, 15.0, 200.0]])
+def test_calibrate_command_recovers_the_camera_pose(tmp_path, marker_rpy_deg):
+    """A marker drawn, tilted, where the default webcam would see it gives back the default camera pose."""
+    from rtcohand_drake.vision.calibrate import main as calibrate, rpy_deg
+    from rtcohand_drake.vision.calibration import CameraCalibration, load_calibration
+
+    truth = CameraCalibration()
+    R_UM = CameraCalibration(camera_rpy_deg=marker_rpy_deg).R_UC()  # the same roll-pitch-yaw convention
+    p_UM = np.array([0.02, 0.2, 0.05])
+    R_CM = truth.R_UC().T @ R_UM
+    p_CM = truth.R_UC().T @ (p_UM - truth.p_UC())
+    assert R_CM[2, 2] < -0.7  # the marker faces the camera
+    global K
+    K_saved, K = K, truth.camera_matrix()
+    try:
+        image = render_marker(R_CM, p_CM)
+    finally:
+        K = K_saved
+    path = tmp_path / "marker.png"
+    cv2.imwrite(str(path), image)
+    out = tmp_path / "cam.yaml"
+    assert calibrate(["--out", str(out), "--image", str(path), "--marker-position-m", *map(str, p_UM),
+                      "--marker-rpy-deg", *map(str, marker_rpy_deg)]) == 0
+    got = load_calibration(out)
+    assert np.linalg.norm(got.p_UC() - truth.p_UC()) < 0.005
+    angle = np.degrees(np.arccos(np.clip((np.trace(got.R_UC().T @ truth.R_UC()) - 1) / 2, -1, 1)))
+    assert angle < 1.0
+    # rpy_deg inverts the calibration's own convention.
+    assert np.allclose(CameraCalibration(camera_rpy_deg=rpy_deg(R_UM)).R_UC(), R_UM, atol=1e-9)
+
+
+def test_calibrate_without_a_marker_is_one_line(tmp_path):
+    from rtcohand_drake.vision.calibrate import main as calibrate
+
+    path = tmp_path / "empty.png"
+    cv2.imwrite(str(path), np.full((480, 640, 3), 90, np.uint8))
+    from rtcohand_drake.errors import InputError
+
+    with pytest.raises(InputError, match="no ArUco marker 0") as err:
+        calibrate(["--out", str(tmp_path / "cam.yaml"), "--image", str(path)])
+    assert str(path) in str(err.value)
