@@ -69,6 +69,8 @@ class Protocol:
     countdown_s: float = 3.0  # before each clip
     clip_s: float = 4.0  # one clip: the cue ramps up, holds, ramps down
     cue_start_s: float = 0.5  # the cue starts moving this long into the clip
+    # ... and is still by then (s into the clip), so its labels, placed later, end within the clip
+    cue_end_s: float = 3.0
     cue_ramp_s: float = 0.6
     cue_speed_m_s: float = 0.08  # the cue workpiece's speed on a translation
     cue_rate_rad_s: float = 0.5  # and its turn rate
@@ -108,7 +110,7 @@ def cue_twist(motions, t: np.ndarray, protocol: Protocol) -> np.ndarray:
     from rtcohand_drake.cell.geometry import smoothstep
 
     on, ramp = protocol.cue_start_s, protocol.cue_ramp_s
-    off = protocol.clip_s - protocol.cue_start_s
+    off = min(protocol.cue_end_s, protocol.clip_s - protocol.cue_start_s)
     envelope = smoothstep((t - on) / ramp) * smoothstep((off - t) / ramp)
     twist = np.zeros((len(t), 6))
     for d, s in motions:
