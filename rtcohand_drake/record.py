@@ -192,7 +192,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
     from rtcohand_drake.data.dataset import Clip
     from rtcohand_drake.data.population.handler import integrate_pose
 
-    start = np.array([0.0, 0.55, 0.0, 1.0, 0.0, 0.0, 0.0])
+    start = np.array([0.0, 0.55, 0.0, 1.0, 0.0, 0.0, 0.0])  # the cue's pose at rest, U
     step = 1.0 / (protocol.fps if live else getattr(tracker, "fps", protocol.fps))
     wall0 = time.monotonic()
     t_session, clips = 0.0, []
@@ -222,7 +222,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
             markers.append(tracker.marker() if labels == "aruco" else None)
             if view is not None:
                 cue_so_far = cue_twist(motions, np.arange(0.0, frame_time - t0 + 1e-9, step), protocol)
-                view.show("record", integrate_pose(start, cue_so_far, step)[-1])
+                view.show("record", integrate_pose(start[:3], cue_so_far, step)[-1])
         t_session = t0 + protocol.clip_s
         times = np.asarray(times)
         keep = np.concatenate([[True], np.diff(times) > 0]) if len(times) else np.zeros(0, bool)

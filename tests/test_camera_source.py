@@ -219,3 +219,33 @@ def test_missing_video_or_calibration_is_one_line(tmp_path, context_file):
     with pytest.raises(InputError, match="no such camera calibration file") as err:
         main(["--video", str(missing), "--camera-calibration", str(tmp_path / "none.yaml"), *common])
     assert "none.yaml" in str(err.value)
+
+
+def test_live_tracker_thread_stamps_frames_and_freezes_at_the_end(tmp_path):
+    """The live tracker on a file read as if it were a camera: frames stamped as read, then frozen."""
+    import time
+
+    from rtcohand_drake.vision.capture import HandPipeline, LiveCameraTracker
+
+    frames = [f for f, _ in drawn_hand_frames(CALIBRATION, [("wave", 0.5)])]
+    path = tmp_path / "live.avi"
+    write_video(path, frames + [frames[-1]] * 15)  # then the same image again: a frozen camera
+    tracker = LiveCameraTracker(path, HandPipeline(CALIBRATION))
+    try:
+        first = tracker.latest(10.0)  # ties the tracker's clock to the diagram's time 10 s
+        deadline = time.monotonic() + 30.0
+        seen = set()
+        while not tracker.closed and time.monotonic() < deadline:
+            keypoints, t = tracker.latest(10.0)
+            if keypoints is not None:
+                seen.add(t)
+            time.sleep(0.005)
+        assert tracker.closed
+        assert len(seen) >= 3 and all(9.0 < t < 40.0 for t in seen)
+        keypoints, t_end = tracker.latest(10.0)
+        assert keypoints is None and t_end == tracker.latest(11.0)[1]  # closed: no new frame time
+        # The repeated images were not new frames: the last stamp is that of the last distinct one.
+        assert len(tracker._pipeline.processing_s) == len(frames)
+    finally:
+        tracker.close()
+    assert first[0] is None or first[0].shape == (21, 3)

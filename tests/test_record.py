@@ -91,10 +91,14 @@ class _FakeCamera:
 
 @pytest.mark.parametrize("labels", ["cue", "aruco"])
 def test_tracked_session_labels(labels):
-    from rtcohand_drake.record import record_tracked
+    from pydrake.geometry import Meshcat, MeshcatParams
+
+    from rtcohand_drake.record import CueView, record_tracked
 
     protocol = Protocol(countdown_s=1.0, clip_s=3.0)
-    clips = record_tracked(_FakeCamera(), [((0, 1),), ((5, -1),)], protocol, "ME", live=False, labels=labels)
+    view = CueView(Meshcat(MeshcatParams(host="localhost", port=0))) if labels == "cue" else None
+    clips = record_tracked(_FakeCamera(), [((0, 1),), ((5, -1),)], protocol, "ME", live=False, labels=labels,
+                           view=view)
     assert [c.clip_id for c in clips] == ["00_Tx+", "01_Rz-"]
     for clip in clips:
         assert clip.num_frames == 90 and clip.fps == pytest.approx(30.0)

@@ -150,9 +150,11 @@ class VideoFileTracker:
 class LiveCameraTracker:
     """A camera read and tracked in its own thread (module docstring)."""
 
-    def __init__(self, device: int, pipeline: HandPipeline):
+    def __init__(self, device, pipeline: HandPipeline):
+        """`device`: an OpenCV camera number, or a path (a video file read as if it were a camera)."""
         self._pipeline = pipeline
-        self._capture = _open(int(device), f"camera {device}")
+        source = int(device) if isinstance(device, int) else str(device)
+        self._capture = _open(source, f"camera {device}")
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray | None, float] = (None, -math.inf)  # keypoints, capture time (monotonic)
         self._marker = None  # the marked object's pose in that frame
