@@ -249,3 +249,13 @@ def test_live_tracker_thread_stamps_frames_and_freezes_at_the_end(tmp_path):
     finally:
         tracker.close()
     assert first[0] is None or first[0].shape == (21, 3)
+
+
+def test_bad_model_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.task"
+    bad.write_text("not a model bundle\n")
+    with pytest.raises(InputError, match="not a usable hand landmarker bundle") as err:
+        HandLandmarker(model=bad)
+    assert str(bad) in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(InputError, match="no hand landmarker model file"):
+        HandLandmarker(model=tmp_path / "none.task")
