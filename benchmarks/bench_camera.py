@@ -32,6 +32,9 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
+    p.add_argument("--num-hands", type=int, default=2,
+                   help="MediaPipe's num_hands (scenario camera.num_hands): with fewer hands tracked than this "
+                        "it runs the palm detector on every frame")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args()
     import cv2
@@ -41,6 +44,7 @@ def main() -> None:
     from rtcohand_drake.data.hand_features import part_frames, part_velocities
     from rtcohand_drake.vision.calibration import CameraCalibration
     from rtcohand_drake.vision.capture import HandPipeline
+    from rtcohand_drake.vision.config import Camera
     from rtcohand_drake.vision.drawn_hand import drawn_hand_frames, write_video
 
     calibration = CameraCalibration(image_size_px=[args.width, args.height],
@@ -50,7 +54,7 @@ def main() -> None:
         write_video(path, (f for f, _ in drawn_hand_frames(calibration, [("wave", args.seconds)])))
         capture = cv2.VideoCapture(str(path))
         fps = capture.get(cv2.CAP_PROP_FPS)
-        pipeline = HandPipeline(calibration)
+        pipeline = HandPipeline(calibration, Camera(num_hands=args.num_hands))
         decode, track, features, cpu, lost = [], [], [], [], 0
         previous = None
         i = 0
@@ -81,7 +85,7 @@ def main() -> None:
         pipeline.close()
     ms = lambda x: {"median": float(np.median(x) * 1e3), "p95": float(np.percentile(x, 95) * 1e3)}
     total = np.asarray(track) + np.asarray(features)
-    result = {"frames": i, "frames_without_hand": lost, "width": args.width, "height": args.height,
+    result = {"frames": i, "num_hands": args.num_hands, "frames_without_hand": lost, "width": args.width, "height": args.height,
               "decode_ms": ms(decode), "landmarks_and_fit_ms": ms(track), "features_ms": ms(features),
               "capture_to_features_ms": ms(total), "capture_to_features_cpu_ms": ms(cpu),
               "cpu_threads": len(os.sched_getaffinity(0)), "load_average_1min": load}

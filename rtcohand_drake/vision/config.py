@@ -8,7 +8,9 @@ import dataclasses as dc
 class Camera:
     """MediaPipe's thresholds and which hand the camera source follows."""
 
-    # The most hands MediaPipe looks for in a frame; the hand rule below picks one.
+    # The most hands MediaPipe looks for in a frame; the hand rule below picks one. With fewer
+    # hands in view than this MediaPipe runs its palm detector on every frame: 1 about halves the
+    # tracker's time (README, "Measured figures"), but then MediaPipe alone picks the hand.
     num_hands: int = 2
     # MediaPipe's confidence thresholds (0..1): palm detection, hand presence, tracking.
     min_detection_confidence: float = 0.5
