@@ -5,7 +5,8 @@
 
 or, without a policy, a scripted twist source straight into the supervisor.
 An operator panel (Meshcat, or a schedule of pauses) feeds the supervisor's pause and
-sensitivity input. `VectorLogSink`s record everything the run log needs, and a
+sensitivity input, through the pause hand sign (`PauseHandSign`, a thumbs-up held
+still toggles the same pause) when the scenario's `hand_sign.enabled`. `VectorLogSink`s record everything the run log needs, and a
 `MeshcatVisualizer` (plus the hand/twist/status overlay) draws the run when a
 Meshcat is given. `RunDiagram` keeps handles to the pieces.
 """
@@ -20,6 +21,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSyst
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from rtcohand_drake.systems.diff_ik import FollowStatus, make_twist_to_joint_velocity
+from rtcohand_drake.systems.hand_sign import PauseHandSign
 from rtcohand_drake.systems.moving_average_downsampler import MovingAverageDownsampler
 from rtcohand_drake.systems.operator_panel import MeshcatOperatorPanel, ScheduledOperatorPanel
 from rtcohand_drake.run_log import RunLog
@@ -31,7 +33,7 @@ from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.systems.scripted_twist import ScriptedTwist
 from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.stations.sim import make_sim_station
-from rtcohand_drake.interfaces import FACES_INSPECTED, FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, READ_VARIANCE, SPEED_SCALE, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import FACES_INSPECTED, FOLLOW_STATUS, GESTURE_FEATURES, GESTURE_STATUS, HAND_SIGN, INTENDED_TWIST, KEYPOINTS, OPERATOR, POLICY_MEAN, POLICY_STD, POSITION_MEASURED, READ_VARIANCE, SPEED_SCALE, QUERY_OBJECT, RESUME_COUNT, SAFETY_STATUS, TWIST_COMMAND, TWIST_REQUEST, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
 
 
 # Meshcat's starting view (world frame, m): three-quarter, over the inspector's right shoulder.
@@ -54,6 +56,7 @@ class RunDiagram:
     overlay: LeafSystem | None = None
     gesture_source: str = "scripted"
     monitor: InspectionMonitor | None = None
+    hand_sign: PauseHandSign | None = None
 
 
 def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, policy: LeafSystem | None = None,
@@ -76,7 +79,15 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
                                     source or ScriptedTwist(scenario.scripted_motion))
 
     connect = builder.Connect
-    connect(operator.GetOutputPort(OPERATOR), supervisor.GetInputPort(OPERATOR))
+    keypoints = source.GetOutputPort(KEYPOINTS) if source.HasOutputPort(KEYPOINTS) else _nan_keypoints(builder)
+    hand_sign = None
+    if scenario.hand_sign.enabled:
+        hand_sign = builder.AddNamedSystem("hand_sign", PauseHandSign(scenario.hand_sign))
+        connect(keypoints, hand_sign.GetInputPort(KEYPOINTS))
+        connect(operator.GetOutputPort(OPERATOR), hand_sign.GetInputPort(OPERATOR))
+        connect(hand_sign.GetOutputPort(OPERATOR), supervisor.GetInputPort(OPERATOR))
+    else:
+        connect(operator.GetOutputPort(OPERATOR), supervisor.GetInputPort(OPERATOR))
     connect(source.GetOutputPort(GESTURE_STATUS), supervisor.GetInputPort(GESTURE_STATUS))
     connect(station.GetOutputPort(WORKPIECE_POSE), supervisor.GetInputPort(WORKPIECE_POSE))
     if source.HasInputPort(WORKPIECE_POSE):  # a closed-loop source (the simulated person) watches the part
@@ -116,8 +127,12 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         "speed_scale": log(supervisor.GetOutputPort(SPEED_SCALE), scenario.safety.period_s),
         "follow_status": log(controller.GetOutputPort(FOLLOW_STATUS), scenario.control_period_s),
     }
+    policy_period = 1.0 / scenario.policy.rate_hz
+    if hand_sign is not None:
+        loggers["hand_sign"] = log(hand_sign.GetOutputPort(HAND_SIGN), scenario.hand_sign.period_s)
+    loggers["gesture_status"] = log(source.GetOutputPort(GESTURE_STATUS), policy_period)
+    loggers["gesture_keypoints"] = log(keypoints, policy_period)
     if policy is not None:
-        policy_period = 1.0 / scenario.policy.rate_hz
         loggers["policy_mean"] = log(policy.GetOutputPort(POLICY_MEAN), policy_period)
         loggers["policy_std"] = log(policy.GetOutputPort(POLICY_STD), policy_period)
         if policy.HasOutputPort(READ_VARIANCE):
@@ -130,8 +145,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
             builder, station.GetOutputPort(QUERY_OBJECT), meshcat,
             MeshcatVisualizerParams(role=Role.kIllustration, prefix="cell"))
         overlay = builder.AddNamedSystem("overlay", RunOverlay(meshcat, scenario.cell.user_frame.to_rigid_transform()))
-        connect(source.GetOutputPort(KEYPOINTS) if source.HasOutputPort(KEYPOINTS)
-                else _nan_keypoints(builder), overlay.GetInputPort(KEYPOINTS))
+        connect(keypoints, overlay.GetInputPort(KEYPOINTS))
         connect(supervisor.GetOutputPort(TWIST_COMMAND), overlay.GetInputPort(TWIST_COMMAND))
         connect(supervisor.GetOutputPort(SAFETY_STATUS), overlay.GetInputPort(SAFETY_STATUS))
         connect(station.GetOutputPort(WORKPIECE_POSE), overlay.GetInputPort(WORKPIECE_POSE))
@@ -145,7 +159,7 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
     diagram.set_name("rtcohand_run")
     name = gesture_source or ("scripted" if policy is None else type(source).__name__)
     return RunDiagram(diagram, station, controller, supervisor, source, operator, loggers, policy,
-                      command_filter, visualizer, overlay, name, monitor)
+                      command_filter, visualizer, overlay, name, monitor, hand_sign)
 
 
 def _nan_keypoints(builder):
@@ -185,13 +199,28 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         if "read_variance" in run.loggers:
             _, variance = _log_arrays(run.loggers["read_variance"], root_context)
             log.policy_read_variance = variance[:, 0]
+    log.gesture_time, status = _log_arrays(run.loggers["gesture_status"], root_context)
+    log.gesture_valid, log.gesture_frame_time = status[:, 0], status[:, 1]
+    _, log.gesture_keypoints = _log_arrays(run.loggers["gesture_keypoints"], root_context)
 
     t, status = _log_arrays(run.loggers["safety_status"], root_context)
     modes = status[:, 0].round().astype(int)
     kinds = {Mode.PAUSED: "pause", Mode.WATCHDOG: "watchdog", Mode.RUNNING: "resume"}
-    _transition_events(log, t, modes, lambda m, prev: (
-        (kinds[Mode(m)], f"supervisor {Mode(m).name.lower()}") if prev is not None or m != Mode.RUNNING
-        else (None, "")))
+    toggles = _sign_toggle_times(run, root_context)
+
+    # A pause, or a resume out of one, names its source: the hand sign when the sign toggled
+    # since the supervisor's mode last changed, else the operator panel.
+    previous, since = None, -np.inf
+    for t_now, m in zip(t, modes):
+        if m == previous:
+            continue
+        if previous is not None or m != Mode.RUNNING:
+            detail = f"supervisor {Mode(m).name.lower()}"
+            if m == Mode.PAUSED or (previous == Mode.PAUSED and m == Mode.RUNNING):
+                by_sign = np.any((toggles > since) & (toggles <= t_now + 1e-9))
+                detail += " (source: hand sign)" if by_sign else " (source: operator panel)"
+            log.add_event(t_now, kinds[Mode(m)], detail)
+        previous, since = m, t_now
     acted = status[:, 2].round().astype(int)
     for rule in rules.RULES:  # the same table the supervisor applies
         on = (acted & int(rule.flag)) != 0
@@ -205,6 +234,16 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         if (prev is not None or c != FollowStatus.FOLLOWING) else (None, "")))
     log.events.sort(key=lambda e: e.time)
     return log
+
+
+def _sign_toggle_times(run: RunDiagram, root: Context) -> np.ndarray:
+    """When the pause hand sign toggled (s); empty without one."""
+    if "hand_sign" not in run.loggers:
+        return np.zeros(0)
+    t, sign = _log_arrays(run.loggers["hand_sign"], root)
+    counts = np.concatenate([[0.0], sign[:, 2]])
+    # A log sample at t holds the state of the update before it, one sign period earlier.
+    return t[np.diff(counts) > 0.5] - run.hand_sign.period_s
 
 
 def peak_speeds(times: np.ndarray, poses: np.ndarray) -> tuple[float, float]:

@@ -57,6 +57,7 @@ READ_VARIANCE = "read_variance"  # (1) out: the read's predictive variance facto
 TWIST_REQUEST = "twist_request"  # (6) filtered twist, to the supervisor
 OPERATOR = "operator"  # (2) [pause (0/1), sensitivity factor], from the operator panel
 OPERATOR_DIM = 2
+HAND_SIGN = "hand_sign"  # (3) [toggled (0/1), openness, toggles], from the pause hand sign
 TWIST_COMMAND = "twist_command"  # (6) the supervisor's command, to the differential IK
 SAFETY_STATUS = "safety_status"  # (3) [mode, resume_count, interventions]
 SAFETY_STATUS_DIM = 3

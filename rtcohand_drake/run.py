@@ -4,6 +4,7 @@
         [--duration S] [--realtime-rate R] [--no-meshcat | --no-wait] [--seed N]
         [--gesture-source synthetic|replay|camera|scripted|joystick]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
+        [--camera N | --video PATH] [--camera-calibration FILE]   # with --gesture-source camera
         [--context-file PATH.h5 [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
         [--hardware --robot-ip IP [--dry-run]]                  # the real arm (kortex_station)
@@ -55,6 +56,12 @@ def make_parser() -> argparse.ArgumentParser:
                    + " (default: replay with --gesture-file, else synthetic)")
     p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order)")
+    p.add_argument("--camera", type=int, default=None, help="camera source: the OpenCV camera number")
+    p.add_argument("--video", type=Path, default=None,
+                   help="camera source: a video file, played in simulated time at its own frame rate")
+    p.add_argument("--camera-calibration", type=Path, default=None,
+                   help="camera source: intrinsics and the camera's pose in the user frame (YAML; "
+                        "default: a webcam facing the person, with a warning)")
     p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
     p.add_argument("--context-user", default=None, help="which user of --context-file")
     p.add_argument("--user", default=None, help="the simulated person's user id (synthetic source)")
@@ -81,12 +88,18 @@ def _check_args(args) -> None:
     for path in (args.log, args.html):
         if path is not None and not (path.parent if str(path.parent) else Path(".")).is_dir():
             raise InputError(f"{path}: directory {path.parent} does not exist")
+    camera_flags = args.camera is not None or args.video is not None or args.camera_calibration is not None
     if args.gesture_source is None:
-        args.gesture_source = "replay" if args.gesture_file is not None else "synthetic"
+        args.gesture_source = ("replay" if args.gesture_file is not None else "camera" if camera_flags
+                               else "synthetic")
     if args.gesture_source == "replay" and args.gesture_file is None:
         raise InputError("command line: --gesture-source replay needs --gesture-file PATH.h5")
     if args.gesture_source != "replay" and (args.gesture_file is not None or args.clip is not None):
         raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
+    if args.gesture_source == "camera" and (args.camera is None) == (args.video is None):
+        raise InputError("command line: --gesture-source camera needs exactly one of --camera N and --video PATH")
+    if args.gesture_source != "camera" and camera_flags:
+        raise InputError("command line: --camera, --video and --camera-calibration go with --gesture-source camera")
     if args.population_seed is not None and args.gesture_source not in ("synthetic", "joystick"):
         raise InputError("command line: --population-seed goes with the synthetic and joystick gesture sources")
     if args.context_user is not None and args.context_file is None:
@@ -190,6 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if station is not None:
             station.close()  # Stop(), then close the session, on every exit path
+        if hasattr(run.source, "close"):
+            run.source.close()  # a camera source releases its camera and tracker
     wall = time.perf_counter() - wall_start
     root = simulator.get_context()
     sim_time = root.get_time()

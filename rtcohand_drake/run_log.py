@@ -9,6 +9,7 @@ Layout (docs/interfaces.md (the run log); extensions are marked +):
   /policy/time (P,) /policy/mean (P,6) /policy/std (P,6) + /policy/read_variance (P,)
   /command/time (M,) /command/twist (M,6) + /command/speed_scale (M,)
   /robot/time (K,) /robot/q (K,7) /robot/v (K,7) /robot/workpiece_pose (K,7)
+  + /gesture/time (G,) + /gesture/valid (G,) + /gesture/frame_time (G,) + /gesture/keypoints (G,63)
   /events  compound (time f8, kind str, detail str)
   / attrs: scenario, model, gesture_source, completed, faces_inspected,
            completion_time, + format = "rtcohand-runlog", + version = 1
@@ -56,6 +57,12 @@ class RunLog:
     robot_q: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
     robot_v: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
     robot_workpiece_pose: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    # The gesture source's output at the policy rate: sample times (s), valid (0/1), the time of
+    # the frame the gesture came from (s), the 21-point skeleton in U (m, NaN when the hand is lost).
+    gesture_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    gesture_valid: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    gesture_frame_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    gesture_keypoints: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 63)))
     events: list[Event] = dc.field(default_factory=list)
     extra_attrs: dict = dc.field(default_factory=dict)
 
@@ -69,6 +76,8 @@ _DATASETS = {
     "command/time": "command_time", "command/twist": "command_twist", "command/speed_scale": "command_speed_scale",
     "robot/time": "robot_time", "robot/q": "robot_q", "robot/v": "robot_v",
     "robot/workpiece_pose": "robot_workpiece_pose",
+    "gesture/time": "gesture_time", "gesture/valid": "gesture_valid",
+    "gesture/frame_time": "gesture_frame_time", "gesture/keypoints": "gesture_keypoints",
 }
 _EVENT_DTYPE = np.dtype([("time", "f8"), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
 

@@ -24,10 +24,12 @@ import yaml
 from rtcohand_drake.cell.layout import Box, Cell, Robot
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.systems.diff_ik import DiffIk
+from rtcohand_drake.systems.hand_sign_config import HandSign
 from rtcohand_drake.systems.moving_average_downsampler import CommandFilter
 from rtcohand_drake.systems.policy import Policy
 from rtcohand_drake.systems.safety.config import Safety
 from rtcohand_drake.systems.scripted_twist import TwistSegment
+from rtcohand_drake.vision.config import Camera
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -58,6 +60,10 @@ class Scenario:
     policy: Policy = dc.field(default_factory=Policy)
     command_filter: CommandFilter = dc.field(default_factory=CommandFilter)
     safety: Safety = dc.field(default_factory=Safety)
+    # The camera gesture source's hand tracker (--gesture-source camera).
+    camera: Camera = dc.field(default_factory=Camera)
+    # The pause hand sign (a closed fist held still).
+    hand_sign: HandSign = dc.field(default_factory=HandSign)
     # A scripted twist sequence, for runs without a gesture pipeline.
     scripted_motion: list[TwistSegment] = dc.field(default_factory=list)
 
@@ -166,6 +172,18 @@ def _check_values(s: Scenario, source: str) -> None:
     need(min(sa.mold_exit_height_m, sa.mold_turn_height_m, sa.mold_exit_margin_m, sa.mold_seat_height_m,
              *sa.mold_exit_half_xy_m) >= 0,
          "safety mold corridor heights and margin must be >= 0")
+    c = s.camera
+    need(c.num_hands >= 1, "camera.num_hands must be >= 1")
+    need(all(0.0 <= v <= 1.0 for v in (c.min_detection_confidence, c.min_presence_confidence,
+                                       c.min_tracking_confidence)), "camera confidence thresholds must be in [0, 1]")
+    need(c.hand in ("right", "left", "largest"), f"camera.hand must be right, left or largest, got {c.hand!r}")
+    h = s.hand_sign
+    need(h.hold_s > 0 and h.period_s > 0, "hand_sign.hold_s and hand_sign.period_s must be > 0")
+    need(0 < h.fist_below < h.open_above, "hand_sign: need 0 < fist_below < open_above")
+    need(h.max_drift_m > 0, "hand_sign.max_drift_m must be > 0")
+    need(0 < h.thumb_up_within_deg and h.thumb_hysteresis_deg >= 0
+         and h.thumb_up_within_deg + h.thumb_hysteresis_deg < 90,
+         "hand_sign: need 0 < thumb_up_within_deg, thumb_hysteresis_deg >= 0, their sum < 90")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 

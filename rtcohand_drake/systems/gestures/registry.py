@@ -31,7 +31,9 @@ class GestureSetup:
     # The user's own labelled clips as policy context when the run gives no --context-file:
     # a callable returning [(features (T, 36), labels (T, 6)), ...]; None when the source has none.
     default_context: Callable[[], list] | None = None
-    end_time: float | None = None  # seconds, for a finite stream (the run ends there by default)
+    # Seconds, for a finite stream (the run ends there by default); inf for a live stream (the run
+    # goes on until Ctrl-C); None: the run ends when the task is done (scenario.stop_when_done).
+    end_time: float | None = None
 
 
 GESTURE_SOURCES: dict[str, GestureSourceEntry] = {

@@ -1,0 +1,391 @@
+"""`python -m rtcohand_drake.record`: record a person's own labelled clips, cued in Meshcat.
+
+    python -m rtcohand_drake.record --out ME.h5 --user ME
+        [--camera N | --video PATH | --simulated-user uXX [--population-seed N]]
+        [--camera-calibration FILE] [--no-meshcat] [--only Tx+,Rz-] [--seed N] [--scenario S]
+        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]]
+
+The protocol is the paper's: for each target motion Meshcat shows a cue, a
+workpiece moving the way the person should ask for, after a countdown; the
+person gestures while watching it. The 12 one-motion clips (both signs of Tx,
+Ty, Tz, Rx, Ry, Rz) come first, then the two-motion clips of `TWO_MOTIONS`.
+The label of a clip is the cue's own twist, so no handler is needed; the file
+records that (root attribute `label_source = "cue"`, docs/interfaces.md).
+The cue leads the gesture by the person's response time, while the policy
+was trained on labels that follow the gesture (a handler's, who reacts
+late). So the labels are the cue's twist shifted later by
+`Protocol.response_delay_s` + `Protocol.label_lag_s`; the file records the
+shift (root attribute `label_delay_s`).
+Clips are written per the gesture dataset contract, the person as the user
+(group "out-sample", split "train"). Then the reading check
+(`rtcohand_drake.analysis.context_reading`) runs on the new file and names
+the motions read poorly, to record again with `--only`.
+
+`--labels aruco` is the paper's human-human protocol instead: a handler
+moves an object carrying an ArUco marker in front of the camera as the
+person gestures (the cue still shows the handler what to do); the marker's
+pose (`rtcohand_drake.vision.aruco`) in each frame, in U, differentiated and
+lightly smoothed, is the label (`label_source = "aruco"`, no shift: the
+handler follows the gesture as the training data's handler did).
+
+Where the gestures come from:
+- `--camera N`: a webcam, live (`rtcohand_drake.vision.capture.LiveCameraTracker`);
+- `--video PATH`: a video file of a session recorded to this protocol's
+  timing (countdown, then the cue), played at its own frame rate;
+- `--simulated-user uXX`: the built-in simulated person (a user of the
+  generated population, `rtcohand_drake.data.population`) responds to each
+  cue with their own gesture for that motion, after their perception delay
+  (`PersonConfig.perception_delay_s` of the simulated person); the cue's
+  timing and size follow that person's gesture for the motion. Headless and
+  repeatable (`--seed`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses as dc
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from rtcohand_drake.errors import InputError, run_cli
+
+DIMENSIONS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+ONE_MOTIONS = tuple(((d, s),) for d in range(6) for s in (1, -1))
+# Two-motion clips: a move with a turn, and two moves, in both sign combinations' common forms.
+TWO_MOTIONS = (((0, 1), (1, 1)), ((1, -1), (2, 1)), ((2, 1), (5, 1)), ((0, -1), (4, -1)),
+               ((1, 1), (3, -1)), ((3, 1), (5, -1)))
+LABEL_SOURCE = "cue"
+
+
+@dc.dataclass
+class Protocol:
+    """The recording session's timing and cue sizes (camera and video sessions)."""
+
+    countdown_s: float = 3.0  # before each clip
+    clip_s: float = 4.0  # one clip: the cue ramps up, holds, ramps down
+    cue_start_s: float = 0.5  # the cue starts moving this long into the clip
+    # ... and is still by then (s into the clip), so its labels, placed later, end within the clip
+    cue_end_s: float = 3.0
+    cue_ramp_s: float = 0.6
+    cue_speed_m_s: float = 0.08  # the cue workpiece's speed on a translation
+    cue_rate_rad_s: float = 0.5  # and its turn rate
+    fps: float = 30.0  # the sampling of a live camera's keypoints
+    # How late a person's gesture follows the cue (s): a visual reaction time (the simulated
+    # person's perception delay is 0.1-0.25 s).
+    response_delay_s: float = 0.15
+    # How late the training data's labels follow a gesture (s): the generated handler's reaction
+    # delay and smoothing, 0.25 s each on average (`GeneratorConfig.handler_delay_s`, `handler_lag_s`).
+    # Chosen with benchmarks/recorded_context.py on simulated people u10 and u13 of population 0
+    # (total shifts 0.45, 0.55, 0.65 s: 0.55 gave the lowest error).
+    label_lag_s: float = 0.4
+
+
+def motion_name(motions) -> str:
+    return "".join(DIMENSIONS[d] + ("+" if s > 0 else "-") for d, s in motions)
+
+
+def parse_only(text: str) -> list[tuple[tuple[int, int], ...]]:
+    """`Tx+,Rz-,Tx+Ty+` -> the motions to record (one- or two-motion names)."""
+    out = []
+    for item in (x.strip() for x in text.split(",")):
+        motions, rest = [], item
+        while rest:
+            if len(rest) < 3 or rest[:2] not in DIMENSIONS or rest[2] not in "+-":
+                raise InputError(f"command line: --only: {item!r} is not a motion like Tx+ or Tx+Ty-")
+            motions.append((DIMENSIONS.index(rest[:2]), 1 if rest[2] == "+" else -1))
+            rest = rest[3:]
+        if not motions or len(motions) > 2 or len({d for d, _ in motions}) != len(motions):
+            raise InputError(f"command line: --only: {item!r} needs one or two different dimensions")
+        out.append(tuple(motions))
+    return out
+
+
+def cue_twist(motions, t: np.ndarray, protocol: Protocol) -> np.ndarray:
+    """The cue workpiece's twist (N, 6) at clip times `t` (s): a smooth ramp up, hold, ramp down."""
+    from rtcohand_drake.cell.geometry import smoothstep
+
+    on, ramp = protocol.cue_start_s, protocol.cue_ramp_s
+    off = min(protocol.cue_end_s, protocol.clip_s - protocol.cue_start_s)
+    envelope = smoothstep((t - on) / ramp) * smoothstep((off - t) / ramp)
+    twist = np.zeros((len(t), 6))
+    for d, s in motions:
+        twist[:, d] += s * (protocol.cue_speed_m_s if d < 3 else protocol.cue_rate_rad_s) * envelope
+    return twist
+
+
+# --------------------------------------------------------------------------- the cue in Meshcat
+
+
+class CueView:
+    """The cue in Meshcat: a workpiece-sized box that moves with the cue's twist (amber during the
+    countdown, green while recording), in the user frame's axes."""
+
+    def __init__(self, meshcat):
+        from pydrake.geometry import Box, Rgba
+
+        self._meshcat = meshcat
+        self._rgba = {"countdown": Rgba(1.0, 0.7, 0.0, 1.0), "record": Rgba(0.1, 0.8, 0.2, 1.0)}
+        self._box = Box(0.15, 0.10, 0.05)
+        meshcat.SetObject("cue/workpiece", self._box, self._rgba["countdown"])
+
+    def show(self, phase: str, pose_U: np.ndarray) -> None:
+        from pydrake.common.eigen_geometry import Quaternion
+        from pydrake.math import RigidTransform
+
+        self._meshcat.SetObject("cue/workpiece", self._box, self._rgba[phase])
+        q = pose_U[3:] / np.linalg.norm(pose_U[3:])
+        self._meshcat.SetTransform("cue/workpiece", RigidTransform(Quaternion(q), pose_U[:3]))
+
+
+# --------------------------------------------------------------------------- sessions
+
+
+def record_simulated(user_id: str, motions_list, population_seed: int, seed: int, user: str):
+    """The simulated person's clips for each cue: their gesture for the motion, their perception delay."""
+    from rtcohand_drake.data.dataset import Clip
+    from rtcohand_drake.data.population import GeneratorConfig, simulate_clip
+    from rtcohand_drake.data.population.handler import integrate_pose
+    from rtcohand_drake.data.population.people import make_user
+    from rtcohand_drake.systems.gestures.simulated_person import PersonConfig, population_user_ids
+
+    config = GeneratorConfig()
+    ids = population_user_ids(config)
+    if user_id not in ids:
+        raise InputError(f"--simulated-user: unknown user {user_id!r}; valid ids: {', '.join(ids)}")
+    index = list(ids).index(user_id)
+    # The same person as the generated population's (the profile is the first draw of its stream).
+    profile = make_user(config, user_id, ids[user_id], np.random.default_rng([int(population_seed), index]))
+    rng = np.random.default_rng([int(population_seed), index, 1_000_003, int(seed)])
+    delay_range = PersonConfig().perception_delay_s
+    clips = []
+    for k, motions in enumerate(motions_list):
+        keypoints, _, _, truth = simulate_clip(config, profile, motions, rng)
+        delay = float(rng.uniform(*delay_range))
+        t = np.arange(len(keypoints)) / config.fps
+        # The cue led the gesture by the person's perception delay; its size is what the gesture means.
+        cue = np.stack([np.interp(t + delay, t, truth.intent[:, d], right=0.0) for d in range(6)], axis=1)
+        pose = integrate_pose(np.asarray(config.object_start_position_m), cue, 1.0 / config.fps)
+        clips.append(Clip(user=user, clip_id=f"{k:02d}_{motion_name(motions)}", group="out-sample",
+                          split="train", active_dims=np.array(sorted(d for d, _ in motions), np.int64),
+                          fps=config.fps, keypoints=keypoints, object_velocity=cue.astype(np.float32),
+                          object_pose=pose.astype(np.float32),
+                          description=f"cue {motion_name(motions)}; simulated person {user_id}, "
+                                      f"perception delay {delay:.2f} s"))
+        print(f"  {clips[-1].clip_id}: {len(keypoints) / config.fps:.1f} s", flush=True)
+    return clips
+
+
+def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: bool, view=None,
+                   labels: str = LABEL_SOURCE):
+    """Clips from a tracker: countdown, then the cue for `clip_s` while the keypoints are kept.
+
+    `labels`: "cue" (the cue's twist) or "aruco" (the marked object's, `tracker.marker()`).
+
+    `live`: a camera, paced by the wall clock; otherwise a video file, whose frames follow the
+    same timeline (countdown then clip, back to back from its start).
+    """
+    from rtcohand_drake.data.dataset import Clip
+    from rtcohand_drake.data.population.handler import integrate_pose
+
+    start = np.array([0.0, 0.55, 0.0, 1.0, 0.0, 0.0, 0.0])  # the cue's pose at rest, U
+    step = 1.0 / (protocol.fps if live else getattr(tracker, "fps", protocol.fps))
+    wall0 = time.monotonic()
+    t_session, clips = 0.0, []
+
+    def wait_until(t):
+        if live:
+            time.sleep(max(0.0, wall0 + t - time.monotonic()))
+
+    for k, motions in enumerate(motions_list):
+        name = motion_name(motions)
+        for n in range(int(np.ceil(protocol.countdown_s)), 0, -1):
+            print(f"  {name}: {n} ...", flush=True)
+            if view is not None:
+                view.show("countdown", start)
+            wait_until(t_session + protocol.countdown_s - n + 1)
+        t0 = t_session + protocol.countdown_s
+        times, frames, markers, seen = [], [], [], None
+        for i in range(int(round(protocol.clip_s / step))):
+            t = t0 + i * step
+            wait_until(t)
+            keypoints, frame_time = tracker.latest(t)
+            if frame_time == seen or not np.isfinite(frame_time):
+                continue  # no new frame
+            seen = frame_time
+            times.append(frame_time - t0)
+            frames.append(np.full((21, 3), np.nan) if keypoints is None else keypoints)
+            markers.append(tracker.marker() if labels == "aruco" else None)
+            if view is not None:
+                cue_so_far = cue_twist(motions, np.arange(0.0, frame_time - t0 + 1e-9, step), protocol)
+                view.show("record", integrate_pose(start[:3], cue_so_far, step)[-1])
+        t_session = t0 + protocol.clip_s
+        times = np.asarray(times)
+        keep = np.concatenate([[True], np.diff(times) > 0]) if len(times) else np.zeros(0, bool)
+        times, frames = times[keep], np.asarray(frames)[keep]
+        markers = [m for m, k in zip(markers, keep) if k]
+        if len(times) < 2 or np.all(np.isnan(frames)):
+            print(f"  {name}: no hand seen; the clip is left out", flush=True)
+            continue
+        fps = 1.0 / float(np.median(np.diff(times)))
+        cue = cue_twist(motions, times, protocol) if labels == "cue" else marker_labels(times, markers)
+        if cue is None:
+            print(f"  {name}: the marker was lost in most frames; the clip is left out", flush=True)
+            continue
+        clips.append(Clip(user=user, clip_id=f"{k:02d}_{name}", group="out-sample", split="train",
+                          active_dims=np.array(sorted(d for d, _ in motions), np.int64), fps=max(fps, 5.0),
+                          keypoints=frames.astype(np.float32), object_velocity=cue.astype(np.float32),
+                          timestamps=times.astype(np.float64), description=f"cue {name}"))
+    return clips
+
+
+def align_labels(clips, delay_s: float):
+    """Each clip's labels: its cue shifted later by `delay_s`, and the pose integrated from them."""
+    from rtcohand_drake.data.population.handler import integrate_pose
+
+    out = []
+    for clip in clips:
+        t = clip.times
+        cue = clip.object_velocity.astype(float)
+        label = np.stack([np.interp(t - delay_s, t, cue[:, d], left=0.0) for d in range(6)], axis=1)
+        start = np.array([0.0, 0.55, 0.0]) if clip.object_pose is None else clip.object_pose[0, :3]
+        pose = integrate_pose(np.asarray(start, float), label, 1.0 / clip.fps)
+        out.append(dc.replace(clip, object_velocity=label.astype(np.float32), object_pose=pose.astype(np.float32)))
+    return out
+
+
+def marker_labels(times: np.ndarray, poses, smooth_frames: int = 5) -> np.ndarray | None:
+    """Twists (N, 6) of the marked object from its poses [(R_UM, p_UM) or None]; lost frames filled
+    in from their neighbours, a centred moving average over `smooth_frames`. None if mostly lost."""
+    from rtcohand_drake.vision.aruco import twist_in_user_frame
+
+    R = np.stack([np.full((3, 3), np.nan) if q is None else q[0] for q in poses])
+    p = np.stack([np.full(3, np.nan) if q is None else q[1] for q in poses])
+    twist = twist_in_user_frame(times, R, p)
+    ok = np.all(np.isfinite(twist), axis=1)
+    if ok.mean() < 0.5:
+        return None
+    filled = np.stack([np.interp(times, times[ok], twist[ok, d]) for d in range(6)], axis=1)
+    kernel = np.ones(smooth_frames) / smooth_frames
+    padded = np.pad(filled, ((smooth_frames // 2, smooth_frames // 2), (0, 0)), mode="edge")
+    return np.stack([np.convolve(padded[:, d], kernel, mode="valid") for d in range(6)], axis=1)
+
+
+def write_recording(path: Path, clips, protocol: Protocol, source: str, labels: str = LABEL_SOURCE) -> None:
+    import h5py
+
+    from rtcohand_drake.data.dataset import write_dataset
+
+    write_dataset(path, clips)
+    with h5py.File(path, "r+") as f:
+        f.attrs["label_source"] = labels
+        f.attrs["label_delay_s"] = protocol.response_delay_s + protocol.label_lag_s if labels == "cue" else 0.0
+        f.attrs["recorder"] = json.dumps({"source": source, "protocol": dc.asdict(protocol)})
+
+
+# --------------------------------------------------------------------------- command line
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(f"command line: {message}")
+
+
+def make_parser() -> argparse.ArgumentParser:
+    p = _ArgumentParser(prog="python -m rtcohand_drake.record", description=__doc__.split("\n")[0])
+    p.add_argument("--out", type=Path, required=True, help="the dataset file to write (HDF5)")
+    p.add_argument("--user", required=True, help="the person's user id in the file")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--camera", type=int, help="OpenCV camera number")
+    src.add_argument("--video", type=Path, help="a video of a session recorded to this protocol's timing")
+    src.add_argument("--simulated-user", help="the built-in simulated person uXX")
+    p.add_argument("--population-seed", type=int, default=0, help="with --simulated-user: the population")
+    p.add_argument("--camera-calibration", type=Path, default=None, help="see python -m rtcohand_drake.run")
+    p.add_argument("--scenario", default="inspection", help="scenario with the camera settings")
+    p.add_argument("--only", default=None, help="record only these motions, e.g. Tx+,Rz- (default: all)")
+    p.add_argument("--no-meshcat", action="store_true", help="no cue in Meshcat (headless)")
+    p.add_argument("--no-check", action="store_true", help="skip the reading check at the end")
+    p.add_argument("--seed", type=int, default=0, help="seeds the simulated person's responses")
+    p.add_argument("--labels", choices=("cue", "aruco"), default="cue",
+                   help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")
+    p.add_argument("--marker-length-m", type=float, default=0.05, help="with --labels aruco: the marker's side")
+    p.add_argument("--marker-id", type=int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
+    directory = args.out.parent if str(args.out.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(f"{args.out}: directory {directory} does not exist")
+    motions_list = parse_only(args.only) if args.only else list(ONE_MOTIONS + TWO_MOTIONS)
+    protocol = Protocol()
+    print(f"recording {len(motions_list)} clips for {args.user}: "
+          + ", ".join(motion_name(m) for m in motions_list), flush=True)
+    if args.labels == "aruco" and args.simulated_user is not None:
+        raise InputError("command line: --labels aruco needs --camera or --video (a handler's marked object)")
+    if not args.marker_length_m > 0:
+        raise InputError(f"command line: --marker-length-m must be > 0, got {args.marker_length_m}")
+    if args.simulated_user is not None:
+        if args.camera_calibration is not None:
+            raise InputError("command line: --camera-calibration goes with --camera or --video")
+        clips = record_simulated(args.simulated_user, motions_list, args.population_seed, args.seed, args.user)
+        source = f"simulated-user {args.simulated_user} (population seed {args.population_seed}, seed {args.seed})"
+    else:
+        from rtcohand_drake.scenario import load_scenario
+        from rtcohand_drake.systems.gestures.camera import make_tracker
+
+        scenario = load_scenario(args.scenario)
+        view = None
+        if not args.no_meshcat:
+            from pydrake.geometry import Meshcat, MeshcatParams
+
+            meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
+            print(f"Meshcat: {meshcat.web_url()} (the cue)", flush=True)
+            view = CueView(meshcat)
+        marker = None
+        if args.labels == "aruco":
+            from rtcohand_drake.vision.aruco import MarkerConfig, MarkerTracker
+
+            marker = MarkerTracker(MarkerConfig(marker_length_m=args.marker_length_m, marker_id=args.marker_id))
+        tracker = make_tracker(scenario, args.camera, args.video, args.camera_calibration, marker_tracker=marker)
+        try:
+            clips = record_tracked(tracker, motions_list, protocol, args.user, live=args.camera is not None,
+                                   view=view, labels=args.labels)
+        finally:
+            tracker.close()
+        source = f"camera {args.camera}" if args.camera is not None else f"video {args.video}"
+    if not clips:
+        raise InputError(f"{args.out}: no clip recorded (no hand was seen)")
+    if args.labels == "cue":
+        delay = protocol.response_delay_s + protocol.label_lag_s
+        clips = align_labels(clips, delay)
+        what = f"the cue's twist, {delay:.2f} s later"
+    else:
+        what = "the ArUco-marked object's twist"
+    write_recording(args.out, clips, protocol, source, args.labels)
+    print(f"wrote {len(clips)} clips of {args.user} to {args.out} (labels: {what})", flush=True)
+    if args.no_check:
+        return 0
+    from rtcohand_drake.analysis import context_reading
+
+    print("reading check:", flush=True)
+    context_reading.main(["--context-file", str(args.out), "--context-user", args.user])
+    missing = [motion_name(m) for m in ONE_MOTIONS if motion_name(m) not in {c.clip_id[3:] for c in clips}]
+    if missing and not args.only:
+        print("not recorded (no hand seen): " + ", ".join(missing))
+    print(f"to record a motion again: python -m rtcohand_drake.record --out OTHER.h5 --user {args.user} "
+          "--only Tx+,Rz- (then give both files' clips as context)")
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.record"))
+
+
+if __name__ == "__main__":
+    entry_point()

@@ -1,0 +1,116 @@
+"""The recorder: a simulated person's session is a contract-valid dataset file with every one-motion clip."""
+
+import h5py
+import numpy as np
+import pytest
+
+from rtcohand_drake.data.dataset import read_dataset
+from rtcohand_drake.errors import InputError
+from rtcohand_drake.record import ONE_MOTIONS, TWO_MOTIONS, Protocol, cue_twist, main, motion_name, parse_only
+
+
+def test_simulated_session_writes_a_contract_valid_file(tmp_path, capsys):
+    out = tmp_path / "me.h5"
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check"]) == 0
+    clips = read_dataset(out)  # the reader validates the whole file against the contract
+    assert len(clips) == len(ONE_MOTIONS) + len(TWO_MOTIONS) and {c.user for c in clips} == {"ME"}
+    one = [c for c in clips if len(c.active_dims) == 1]
+    seen = set()
+    for clip in one:
+        d = int(clip.active_dims[0])
+        label = clip.object_velocity[:, d]
+        sign = 1 if label[np.argmax(np.abs(label))] > 0 else -1
+        seen.add((d, sign))
+        assert clip.clip_id.endswith(motion_name(((d, sign),)))
+        # The label is on the cued dimension alone, and the hand was seen.
+        others = np.delete(clip.object_velocity, d, axis=1)
+        assert np.abs(others).max() < 1e-6 < np.abs(label).max()
+        assert np.isfinite(clip.keypoints).all(axis=(1, 2)).mean() > 0.8
+    assert seen == {m[0] for m in ONE_MOTIONS}  # all 12: both signs of each dimension
+    with h5py.File(out) as f:
+        assert f.attrs["label_source"] == "cue"
+        assert f.attrs["label_delay_s"] == pytest.approx(Protocol().response_delay_s + Protocol().label_lag_s)
+    # The same seed records the same session.
+    again = tmp_path / "again.h5"
+    main(["--out", str(again), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
+          "--only", "Tx+"])
+    assert np.array_equal(read_dataset(again)[0].keypoints, clips[0].keypoints, equal_nan=True)
+
+
+def test_reading_check_names_the_motions(tmp_path, capsys):
+    out = tmp_path / "few.h5"
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
+    text = capsys.readouterr().out
+    assert "| Tx+ | 1 |" in text and "| Rz- | 1 |" in text
+    assert "read below half their size:" in text and "--only" in text
+
+
+def test_cue_and_only():
+    t = np.linspace(0.0, Protocol().clip_s, 121)
+    cue = cue_twist(((0, 1), (5, -1)), t, Protocol())
+    assert cue[0, 0] == 0 and cue[-1, 0] == 0 and cue[:, 0].max() == pytest.approx(Protocol().cue_speed_m_s)
+    assert cue[:, 5].min() == pytest.approx(-Protocol().cue_rate_rad_s) and np.all(cue[:, 1:5] == 0)
+    assert parse_only("Tx+,Rz-,Tx+Ty-") == [((0, 1),), ((5, -1),), ((0, 1), (1, -1))]
+    for bad in ("Tq+", "Tx", "Tx+Tx-", "Tx+Ty+Tz+"):
+        with pytest.raises(InputError, match="--only"):
+            parse_only(bad)
+
+
+def test_bad_arguments_are_one_line(tmp_path):
+    with pytest.raises(InputError, match="unknown user"):
+        main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u99", "--no-check"])
+    with pytest.raises(InputError, match="does not exist"):
+        main(["--out", str(tmp_path / "no" / "x.h5"), "--user", "ME", "--simulated-user", "u10"])
+    with pytest.raises(InputError, match="command line"):
+        main(["--out", str(tmp_path / "x.h5"), "--user", "ME"])  # no gesture source
+
+
+class _FakeCamera:
+    """A tracker with a hand that waves and a marked object moving at a known twist, 30 frames a second."""
+
+    fps = 30.0
+    V, W = np.array([0.05, 0.0, -0.02]), np.array([0.0, 0.0, 0.3])
+
+    def __init__(self):
+        self._t = None
+
+    def latest(self, now_s):
+        from rtcohand_drake.vision.drawn_hand import open_hand_U
+
+        self._t = np.floor(now_s * self.fps + 1e-6) / self.fps
+        return open_hand_U((0.02 * np.sin(3 * self._t), 0.2, 0.0)), self._t
+
+    def marker(self):
+        import cv2
+
+        if int(round(self._t * self.fps)) % 7 == 3:
+            return None  # the marker is missed now and then
+        return cv2.Rodrigues(self.W * self._t)[0], self.V * self._t
+
+
+@pytest.mark.parametrize("labels", ["cue", "aruco"])
+def test_tracked_session_labels(labels):
+    from pydrake.geometry import Meshcat, MeshcatParams
+
+    from rtcohand_drake.record import CueView, record_tracked
+
+    protocol = Protocol(countdown_s=1.0, clip_s=3.0)
+    view = CueView(Meshcat(MeshcatParams(host="localhost", port=0))) if labels == "cue" else None
+    clips = record_tracked(_FakeCamera(), [((0, 1),), ((5, -1),)], protocol, "ME", live=False, labels=labels,
+                           view=view)
+    assert [c.clip_id for c in clips] == ["00_Tx+", "01_Rz-"]
+    for clip in clips:
+        assert clip.num_frames == 90 and clip.fps == pytest.approx(30.0)
+        assert np.all(np.isfinite(clip.keypoints)) and np.all(np.isfinite(clip.object_velocity))
+    if labels == "cue":
+        assert clips[0].object_velocity[:, 0].max() == pytest.approx(protocol.cue_speed_m_s, rel=1e-3)
+        assert clips[1].object_velocity[:, 5].min() == pytest.approx(-protocol.cue_rate_rad_s, rel=1e-3)
+    else:  # the marked object's own twist, whatever the cue
+        middle = clips[0].object_velocity[10:-10]
+        assert np.allclose(middle, np.r_[_FakeCamera.V, _FakeCamera.W], atol=1e-6)
+
+
+def test_aruco_labels_need_a_camera(tmp_path):
+    with pytest.raises(InputError, match="--labels aruco needs"):
+        main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--labels", "aruco"])
