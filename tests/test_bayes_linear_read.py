@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from rtcohand_drake.learning.batching import collate, collate_context
-from rtcohand_drake.learning.export import script_policy
+from rtcohand_drake.learning.export import script_policy, unpack_blr_keys
 from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
 
 
@@ -68,7 +68,9 @@ def test_read_is_the_closed_form_posterior_mean():
     gram = Phi.T @ Phi + lam * np.eye(d)
     A = np.linalg.inv(gram)
     assert keys.shape == (len(Phi), d + -(-d * d // len(Phi)))
-    np.testing.assert_allclose(keys[:, :d].double().numpy(), Phi @ A, atol=1e-5)
+    phi_a, a_packed = unpack_blr_keys(keys, d)
+    np.testing.assert_allclose(phi_a.double().numpy(), Phi @ A, atol=1e-5)
+    np.testing.assert_allclose(a_packed.double().numpy(), A, atol=1e-6)
     W = np.linalg.solve(gram, Phi.T @ Y)
     phi_t = _phis(model, target, [m for m, _, _ in steps])
     r_numpy = phi_t @ W
@@ -79,7 +81,8 @@ def test_read_is_the_closed_form_posterior_mean():
     # the heads' part is the same, cannot be checked directly, so check v against a model with the
     # variance left out through the packed A.
     v_numpy = 1.0 + np.einsum("ti,ij,tj->t", phi_t, A, phi_t)
-    no_var = torch.cat([keys[:, :d], torch.zeros_like(keys[:, d:])], 1)
+    no_var = keys.clone()
+    unpack_blr_keys(no_var, d)[1].zero_()  # A = 0: the same read, v = 1
     flat = _play(policy, target, no_var, values, z_mu)
     v_policy = np.stack([((s / s0) ** 2).double().numpy() for (_, s, _), (_, s0, _) in zip(steps, flat)])
     np.testing.assert_allclose(v_policy, np.repeat(v_numpy[:, None], 6, 1), rtol=1e-4)

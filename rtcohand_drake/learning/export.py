@@ -45,18 +45,23 @@ from rtcohand_drake.learning.checkpoint import load_checkpoint
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
 
-def pack_square(a: torch.Tensor, rows: int) -> torch.Tensor:
-    """A square matrix (d, d) written row-major into `rows` rows of ceil(d^2 / rows) columns, zero-padded."""
-    n = a.numel()
-    cols = (n + rows - 1) // rows
-    packed = torch.zeros(rows * cols, dtype=a.dtype)
-    packed[:n] = a.reshape(-1)
-    return packed.view(rows, cols)
+def pack_blr_keys(phi_a: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+    """The Bayesian linear read's keys: one (K, d + ceil(d^2 / K)) block whose memory holds Phi A
+    (K, d) row-major, then A (d, d) row-major, then zeros. Phi A stays contiguous, so a step
+    reads it in one pass over K x d floats."""
+    k, d = phi_a.shape
+    cols = d + (d * d + k - 1) // k
+    flat = torch.zeros(k * cols, dtype=phi_a.dtype)
+    flat[: k * d] = phi_a.reshape(-1)
+    flat[k * d : k * d + d * d] = a.reshape(-1)
+    return flat.view(k, cols)
 
 
-def unpack_square(packed: torch.Tensor, d: int) -> torch.Tensor:
-    """The (d, d) matrix `pack_square` wrote."""
-    return packed.reshape(-1)[: d * d].view(d, d)
+def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(Phi A (K, d), A (d, d)) from the keys `pack_blr_keys` wrote (views, no copy)."""
+    k = keys.size(0)
+    flat = keys.reshape(-1)
+    return flat[: k * d].view(k, d), flat[k * d : k * d + d * d].view(d, d)
 
 
 class CchpPolicy(nn.Module):
@@ -96,10 +101,10 @@ class CchpPolicy(nn.Module):
         self.mu_head = model.latent.mu_head
         self.sigma_head = model.latent.sigma_head
         self.kq = model.attention.kq
-        # The Bayesian linear read (CchpConfig.read "bayes_linear"): keys are [Phi A, packed A] (K, d + e),
-        # the posterior covariance A (d, d) written row-major into the e = ceil(d^2 / K) trailing
-        # columns, so a step reads r = a . values with a = (Phi A) phi (one pass over K x d) and
-        # v = 1 + phi^T A phi in O(d^2). A 1-unit placeholder projection otherwise; never run.
+        # The Bayesian linear read (CchpConfig.read "bayes_linear"): keys hold Phi A (K, d) and the
+        # posterior covariance A (d, d) (`pack_blr_keys`), so a step reads r = a . values with
+        # a = (Phi A) phi (one contiguous pass over K x d) and v = 1 + phi^T A phi in O(d^2).
+        # A 1-unit placeholder projection otherwise; never run.
         self.bayes_linear = model.blr is not None
         self.phi_proj = model.blr.proj if model.blr is not None else nn.Linear(1, 1)
         self.has_window_proj = model.blr is not None and model.blr.window_proj is not None
@@ -108,7 +113,7 @@ class CchpPolicy(nn.Module):
         self.phi_dim = int(model.blr.dim) if model.blr is not None else 0
         self.blr_lambda = float(model.blr.lam.detach()) if model.blr is not None else 1.0
         if model.blr is not None:
-            self.key_size = self.phi_dim  # the keys' first columns, Phi A; D = d + ceil(d^2 / K) in all
+            self.key_size = self.phi_dim  # Phi A's width; D = d + ceil(d^2 / K) in all (pack_blr_keys)
         # Per-dimension output MLPs as (6, in, out) weights and (6, 1, out) biases for bmm.
         self.out_weights: List[torch.Tensor] = [w.detach().clone() for w in model.output.net.weights]
         self.out_biases: List[torch.Tensor] = [b.detach().clone().unsqueeze(1) for b in model.output.net.biases]
@@ -170,7 +175,7 @@ class CchpPolicy(nn.Module):
             phi = self._phi(h_all[:, self.cell_size:self.state_size], x[mask], win)  # (K, d)
             gram = torch.mm(phi.t(), phi) + self.blr_lambda * torch.eye(self.phi_dim)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
-            keys = torch.cat([torch.mm(phi, A), pack_square(A, phi.size(0))], 1)  # (K, d + e)
+            keys = pack_blr_keys(torch.mm(phi, A), A)  # (K, d + ceil(d^2 / K))
         else:
             keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
@@ -221,8 +226,8 @@ class CchpPolicy(nn.Module):
         if self.bayes_linear:
             d = self.phi_dim
             phi = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # (1, d)
-            weights = torch.mm(phi, keys[:, :d].t())  # (1, K): the equivalent kernel, signed
-            A = unpack_square(keys[:, d:], d)
+            phi_a, A = unpack_blr_keys(keys, d)
+            weights = torch.mm(phi, phi_a.t())  # (1, K): the equivalent kernel, signed
             variance_factor = 1.0 + torch.clamp((torch.mm(phi, A) * phi).sum(), min=0.0).view(1)
         else:
             weights = self._attention(h2, keys)
