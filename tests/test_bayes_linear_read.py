@@ -67,16 +67,26 @@ def test_read_is_the_closed_form_posterior_mean():
     lam = float(model.blr.lam.detach())
     gram = Phi.T @ Phi + lam * np.eye(d)
     A = np.linalg.inv(gram)
-    assert keys.shape == (len(Phi), d + -(-d * d // len(Phi)))
-    phi_a, a_packed = unpack_blr_keys(keys, d)
+    assert keys.shape == (len(Phi), d + -(-(d * d + 6 * d) // len(Phi)))
+    phi_a, a_packed, w_packed = unpack_blr_keys(keys, d)
     np.testing.assert_allclose(phi_a.double().numpy(), Phi @ A, atol=1e-5)
     np.testing.assert_allclose(a_packed.double().numpy(), A, atol=1e-6)
     W = np.linalg.solve(gram, Phi.T @ Y)
+    np.testing.assert_allclose(w_packed.double().numpy(), W, atol=1e-5 * max(1.0, np.abs(W).max()))
     phi_t = _phis(model, target, [m for m, _, _ in steps])
     r_numpy = phi_t @ W
     r_policy = np.stack([(att.double() @ values.double()).numpy() for _, _, att in steps])
     r_policy = r_policy / model.normalizer.label_scale.double().numpy()
     np.testing.assert_allclose(r_policy, r_numpy, atol=1e-5 * max(1.0, np.abs(r_numpy).max()))
+    # step_read's r = phi^T W, without the pass over the context, is the same read.
+    H = policy.hidden_size
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    label_scale = model.normalizer.label_scale.double().numpy()
+    r_read = []
+    for t in range(len(target)):
+        y, _, h, c, read, _, _ = policy.step_read(torch.from_numpy(target[t]), y, h, c, keys, values, z_mu)
+        r_read.append(read[0].double().numpy() / label_scale)
+    np.testing.assert_allclose(np.stack(r_read), r_numpy, atol=1e-5 * max(1.0, np.abs(r_numpy).max()))
     # The std is the heads' std times sqrt(1 + phi^T A phi): the ratio of two steps' stds, where
     # the heads' part is the same, cannot be checked directly, so check v against a model with the
     # variance left out through the packed A.

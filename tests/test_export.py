@@ -73,6 +73,17 @@ def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, sk
     assert policy.hidden_size == 128 + (model.cfg.gesture_hidden_size if key_source == "gesture" else 0) + \
         max(0, window - 1) * 36
     assert torch.allclose(values, torch.from_numpy(np.concatenate([p[1] for p in context])))
+    # step_read: the same step without the attention, which attention_of gives from its query.
+    h = c = torch.zeros(policy.hidden_size)
+    y = torch.zeros(6)
+    for t in range(len(target[0])):
+        mean, std, h, c, read, v, query = policy.step_read(torch.from_numpy(target[0][t]), y, h, c, keys, values, z_mu)
+        assert torch.allclose(mean, means[t], atol=1e-6)
+        assert query.shape == (policy.query_size,) and v.shape == (1,)
+        att = policy.attention_of(query, keys)
+        assert torch.allclose(att, atts[t], atol=1e-6)
+        assert torch.allclose(read, torch.atleast_2d(att) @ values, atol=1e-6)
+        y = mean
 
 
 def test_step_reads_nan_features_as_zeros():

@@ -83,6 +83,56 @@ def test_replay_through_the_diagram_matches_the_offline_module(policy_file, data
     assert np.max(np.abs(means[ok] - offline[shown[ok]])) < 1e-4
 
 
+@pytest.mark.parametrize("read", ["attention", "bayes_linear"])
+def test_attention_port_is_the_steps_attention(tmp_path, dataset, read):
+    """The attention port, computed from the step's query when evaluated, is the attention `step`
+    returns for the same step; a policy file without `step_read` gives the same outputs."""
+    from rtcohand_drake.learning.export import script_policy
+    from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
+
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(hidden_size=32, aggregate_sizes=[32, 32], latent_trunk_sizes=[32, 32], latent_dim=8,
+                            key_size=16, output_hidden=[32], key_source="gesture", gesture_hidden_size=8,
+                            read=read, phi_window=3 if read == "bayes_linear" else 0))
+    model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
+    module = script_policy(model.eval())
+    clips = load_policy_clips(dataset)
+    pieces = [(c.features, c.labels) for c in clips[1:4]]
+    policy = CchpPolicy(module, pieces, 10.0, seed=2, correction_weight=0.5)
+
+    class WithoutRead(torch.nn.Module):  # an older policy file: step and step_with_variance only
+        def __init__(self, inner):
+            super().__init__()
+            self.inner = inner
+            self.hidden_size, self.latent_dim = inner.hidden_size, inner.latent_dim
+
+        def encode_context(self, *args):
+            return self.inner.encode_context(*args)
+
+        def step_with_variance(self, *args):
+            return self.inner.step_with_variance(*args)
+
+    older = CchpPolicy(WithoutRead(module), pieces, 10.0, seed=2, correction_weight=0.5)
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+    keys, values, _, _ = module.encode_context(x_c, y_c, mask)
+    contexts = [p.CreateDefaultContext() for p in (policy, older)]
+    h = c = torch.zeros(module.hidden_size)
+    y = torch.zeros(6)
+    z = torch.from_numpy(policy.sample_z(0).astype(np.float32))
+    for x in clips[0].features[:20]:
+        for system, ctx in zip((policy, older), contexts):
+            system.GetInputPort(GESTURE_FEATURES).FixValue(ctx, x)
+            ctx.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(ctx))
+        y, _, h, c, att = module.step(torch.from_numpy(x.astype(np.float32)), y, h, c, keys, values, z)
+        shown = [system.GetOutputPort("attention").Eval(ctx) for system, ctx in zip((policy, older), contexts)]
+        np.testing.assert_allclose(shown[0], att.numpy(), atol=1e-6)
+        np.testing.assert_allclose(shown[1], att.numpy(), atol=1e-6)
+        twists = [system.GetOutputPort("policy_mean").Eval(ctx) for system, ctx in zip((policy, older), contexts)]
+        read = att.numpy() @ values.numpy()
+        np.testing.assert_allclose(twists[0], read + 0.5 * (y.numpy() - read), atol=1e-5)
+        np.testing.assert_allclose(twists[1], twists[0], atol=1e-6)
+
+
 def test_policy_resamples_z_on_resume(policy_file, dataset):
     clips = load_policy_clips(dataset)
     pieces = [(c.features, c.labels) for c in clips[:3]]

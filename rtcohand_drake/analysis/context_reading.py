@@ -83,7 +83,7 @@ def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: 
     with torch.no_grad():
         for t in range(len(features)):
             y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
-            out[t] = blended_output(y.numpy(), attention.numpy(), values_np, correction_weight)
+            out[t] = blended_output(y.numpy(), np.atleast_2d(attention.numpy()) @ values_np, correction_weight)
     return out
 
 

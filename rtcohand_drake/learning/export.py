@@ -10,10 +10,15 @@
         -> (mean [6], std [6], h [H], c [H], attention [K] (one head) or [heads, K])
     step_with_variance(the same) -> (the same, v [1]): v = 1 + phi^T A phi, the Bayesian
         linear read's predictive variance factor (1 for a softmax-attention read)
+    step_read(the same) -> (mean, std, h, c, r [heads, 6], v [1], query [query_size]): the same
+        step without the attention; r = attention . values (m/s, rad/s). With the Bayesian
+        linear read r = phi^T W, so its cost does not grow with K
+    attention_of(query, keys) -> the attention `step` returns for that step
 
 and the integer attributes feature_dim (36), hidden_size (H: the size of the
 recurrent state h and c, which includes the gesture cell's state when the
-attention keys come from one), latent_dim (Dz), attention_heads and key_size.
+attention keys come from one), latent_dim (Dz), attention_heads, key_size and
+query_size.
 Inputs and outputs are in physical units (features as the hand-feature module
 gives them, twists in m/s and rad/s); NaN features (hand lost) are read as
 zeros. K is the number of True entries of `mask`: each context piece (row of
@@ -45,23 +50,28 @@ from rtcohand_drake.learning.checkpoint import load_checkpoint
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
 
-def pack_blr_keys(phi_a: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-    """The Bayesian linear read's keys: one (K, d + ceil(d^2 / K)) block whose memory holds Phi A
-    (K, d) row-major, then A (d, d) row-major, then zeros. Phi A stays contiguous, so a step
-    reads it in one pass over K x d floats."""
+def pack_blr_keys(phi_a: torch.Tensor, a: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """The Bayesian linear read's keys: one (K, d + ceil((d^2 + 6 d) / K)) block whose memory holds
+    Phi A (K, d) row-major, then A (d, d), then the read's weights W = A Phi^T Y (d, 6, normalised
+    labels), then zeros. Phi A stays contiguous, so a step that returns the attention reads it in
+    one pass over K x d floats; `step_read` needs only A and W."""
     k, d = phi_a.shape
-    cols = d + (d * d + k - 1) // k
+    tail = d * d + d * 6  # A, then W (d, 6 motion dimensions)
+    cols = d + (tail + k - 1) // k
     flat = torch.zeros(k * cols, dtype=phi_a.dtype)
     flat[: k * d] = phi_a.reshape(-1)
     flat[k * d : k * d + d * d] = a.reshape(-1)
+    flat[k * d + d * d : k * d + tail] = w.reshape(-1)
     return flat.view(k, cols)
 
 
-def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Tensor]:
-    """(Phi A (K, d), A (d, d)) from the keys `pack_blr_keys` wrote (views, no copy)."""
+def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(Phi A (K, d), A (d, d), W (d, 6)) from the keys `pack_blr_keys` wrote (views, no copy)."""
     k = keys.size(0)
+    m = 6  # MOTION_DIM (a literal: TorchScript does not close over globals)
     flat = keys.reshape(-1)
-    return flat[: k * d].view(k, d), flat[k * d : k * d + d * d].view(d, d)
+    start = k * d + d * d
+    return flat[: k * d].view(k, d), flat[k * d : start].view(d, d), flat[start : start + d * m].view(d, m)
 
 
 class CchpPolicy(nn.Module):
@@ -113,10 +123,28 @@ class CchpPolicy(nn.Module):
         self.phi_dim = int(model.blr.dim) if model.blr is not None else 0
         self.blr_lambda = float(model.blr.lam.detach()) if model.blr is not None else 1.0
         if model.blr is not None:
-            self.key_size = self.phi_dim  # Phi A's width; D = d + ceil(d^2 / K) in all (pack_blr_keys)
-        # Per-dimension output MLPs as (6, in, out) weights and (6, 1, out) biases for bmm.
-        self.out_weights: List[torch.Tensor] = [w.detach().clone() for w in model.output.net.weights]
-        self.out_biases: List[torch.Tensor] = [b.detach().clone().unsqueeze(1) for b in model.output.net.biases]
+            self.key_size = self.phi_dim  # Phi A's width; D = d + ceil((d^2 + 6 d) / K) in all (pack_blr_keys)
+        # The size of `step_read`'s query, from which `attention_of` gives the attention: phi (d) for the
+        # Bayesian linear read, the attention query (heads * key_size) otherwise.
+        self.query_size = self.phi_dim if self.bayes_linear else cfg.attention_heads * cfg.key_size
+        # Per-dimension output MLPs as (6, in, out) weights and (6, 1, out) biases for bmm. With one
+        # read (one head), every dimension's first layer sees the same input [r, h, z], so that layer
+        # is one (in, 6 * out) matrix (dimension-major columns) for a single product instead. The
+        # form not used is an empty placeholder, so the scripted module has one type.
+        weights = [w.detach() for w in model.output.net.weights]
+        biases = [b.detach() for b in model.output.net.biases]
+        one_read = cfg.attention_heads == 1 or model.blr is not None
+        self.out_first_size = int(weights[0].size(2))
+        if one_read:
+            self.out_first_weight = weights[0].permute(1, 0, 2).reshape(weights[0].size(1), -1).contiguous()
+            self.out_first_bias = biases[0].reshape(1, -1).clone()
+            self.out_first_weights, self.out_first_biases = torch.zeros(0, 0, 0), torch.zeros(0, 0, 0)
+        else:
+            self.out_first_weight, self.out_first_bias = torch.zeros(0, 0), torch.zeros(0, 0)
+            self.out_first_weights = weights[0].clone()
+            self.out_first_biases = biases[0].clone().unsqueeze(1)
+        self.out_weights: List[torch.Tensor] = [w.clone() for w in weights[1:]]
+        self.out_biases: List[torch.Tensor] = [b.clone().unsqueeze(1) for b in biases[1:]]
 
     def _cell(self, finger_feat: torch.Tensor, y_prev_n: torch.Tensor, h: torch.Tensor, c: torch.Tensor
               ) -> Tuple[torch.Tensor, torch.Tensor]:
@@ -175,7 +203,8 @@ class CchpPolicy(nn.Module):
             phi = self._phi(h_all[:, self.cell_size:self.state_size], x[mask], win)  # (K, d)
             gram = torch.mm(phi.t(), phi) + self.blr_lambda * torch.eye(self.phi_dim)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
-            keys = pack_blr_keys(torch.mm(phi, A), A)  # (K, d + ceil(d^2 / K))
+            phi_a = torch.mm(phi, A)
+            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), y_valid))  # (K, d + ceil((d^2 + 6 d) / K))
         else:
             keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
@@ -185,9 +214,8 @@ class CchpPolicy(nn.Module):
         values = y_c.to(torch.float32)[mask]
         return keys, values, z_mu, z_sigma
 
-    def _attention(self, h2: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        """Softmax attention weights (heads, K) of the step's query over the context keys."""
-        q = self.kq(h2[:, self.key_offset:])  # (1, heads * key_size)
+    def _softmax_weights(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """Softmax attention weights (heads, K) of the query q (1, heads * key_size) over the context keys."""
         if self.distance_kernel:
             k = keys.size(0)
             diff = keys.view(k, self.attention_heads, self.key_size) - q.view(1, self.attention_heads, self.key_size)
@@ -199,6 +227,21 @@ class CchpPolicy(nn.Module):
             scores = (keys.view(k, self.attention_heads, self.key_size)
                       * q.view(1, self.attention_heads, self.key_size)).sum(2).t()  # (heads, K)
         return torch.softmax(scores, 1)
+
+    def _weights(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """The attention (heads, K) of a step's query: the Bayesian linear read's equivalent kernel
+        phi^T A Phi^T (signed), or the softmax attention."""
+        if self.bayes_linear:
+            phi_a, _, _ = unpack_blr_keys(keys, self.phi_dim)
+            return torch.mm(query, phi_a.t())
+        return self._softmax_weights(query, keys)
+
+    @torch.jit.export
+    def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """The attention [K] (one head) or [heads, K] of a `step_read` query over the context: what
+        `step` returns as its attention for the same step."""
+        weights = self._weights(query.view(1, -1), keys)
+        return weights[0] if self.attention_heads == 1 else weights
 
     @torch.jit.export
     def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
@@ -214,6 +257,29 @@ class CchpPolicy(nn.Module):
                                       torch.Tensor]:
         """`step`, plus the read's predictive variance factor v = 1 + phi^T A phi ([1]; 1 without the
         Bayesian linear read): how unlike every context gesture this one is."""
+        mean, std, h2, c2, _, v, _, weights = self._step(x_t, y_prev, h, c, keys, values, z, True)
+        attention = weights[0] if self.attention_heads == 1 else weights
+        return mean, std, h2, c2, attention, v
+
+    @torch.jit.export
+    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                             torch.Tensor, torch.Tensor]:
+        """`step_with_variance` without the attention: (mean, std, h, c, r [heads, 6], v [1],
+        query [query_size]). r is the context read in m/s and rad/s (attention . values), and
+        `attention_of(query, keys)` gives the attention when it is wanted. With the Bayesian linear
+        read, r = phi^T W from the encoded context, so the step costs O(d^2) whatever the number
+        of context steps (it does not read `values`)."""
+        mean, std, h2, c2, r, v, query, _ = self._step(x_t, y_prev, h, c, keys, values, z, False)
+        return mean, std, h2, c2, r * self.label_scale, v, query.view(-1)
+
+    def _step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+              keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor, with_attention: bool
+              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                         torch.Tensor, torch.Tensor]:
+        """(mean, std, h, c, r normalised (heads, 6), v, query (1, query_size), attention (heads, K),
+        empty (heads, 0) for a Bayesian linear read without `with_attention`)."""
         x = torch.nan_to_num(x_t, 0.0, 0.0, 0.0) / self.feature_scale
         finger_feat = self.fingers(x.view(6, 6)).view(1, -1)
         h_in = h.view(1, -1)
@@ -224,18 +290,30 @@ class CchpPolicy(nn.Module):
         if self.has_window_proj:
             window = torch.cat([h_in[:, self.state_size:], x.view(1, -1)], 1)  # the last frames, oldest first
         if self.bayes_linear:
-            d = self.phi_dim
-            phi = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # (1, d)
-            phi_a, A = unpack_blr_keys(keys, d)
-            weights = torch.mm(phi, phi_a.t())  # (1, K): the equivalent kernel, signed
-            variance_factor = 1.0 + torch.clamp((torch.mm(phi, A) * phi).sum(), min=0.0).view(1)
+            query = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # phi (1, d)
+            _, A, read_w = unpack_blr_keys(keys, self.phi_dim)
+            variance_factor = 1.0 + torch.clamp((torch.mm(query, A) * query).sum(), min=0.0).view(1)
+            if with_attention:
+                weights = self._weights(query, keys)  # (1, K): the equivalent kernel, signed
+                r = torch.mm(weights, values) / self.label_scale
+            else:
+                weights = torch.zeros(1, 0)
+                r = torch.mm(query, read_w)  # the same read, without the pass over the K steps
         else:
-            weights = self._attention(h2, keys)
-        r = torch.mm(weights, values) / self.label_scale  # (heads, 6)
+            query = self.kq(h2[:, self.key_offset:])  # (1, heads * key_size)
+            weights = self._softmax_weights(query, keys)
+            r = torch.mm(weights, values) / self.label_scale  # (heads, 6)
 
-        hz = torch.cat([h2, z.view(1, -1)], 1)
-        inp = torch.cat([r.expand(6, 6), hz.expand(6, hz.size(1))], 1).unsqueeze(1)  # (6, 1, in)
+        if r.size(0) == 1:
+            inp = torch.addmm(self.out_first_bias, torch.cat([r, h2, z.view(1, -1)], 1), self.out_first_weight)
+            inp = inp.view(6, 1, self.out_first_size)
+        else:  # head d's read goes to dimension d
+            hz = torch.cat([h2, z.view(1, -1)], 1)
+            inp = torch.cat([r.expand(6, 6), hz.expand(6, hz.size(1))], 1).unsqueeze(1)  # (6, 1, in)
+            inp = torch.baddbmm(self.out_first_biases, inp, self.out_first_weights)
         n_layers = len(self.out_weights)
+        if n_layers > 0:
+            inp = torch.relu(inp)
         i = 0
         for w, bias in zip(self.out_weights, self.out_biases):
             inp = torch.baddbmm(bias, inp, w)
@@ -250,11 +328,10 @@ class CchpPolicy(nn.Module):
         mean = mean_n * scale
         std = (self.std_min + (1.0 - self.std_min) * nn.functional.softplus(out[:, 1])) * scale
         std = std * torch.sqrt(variance_factor)
-        attention = weights[0] if self.attention_heads == 1 else weights
         if self.buffer_size > 0:  # carry the newest (phi_window - 1) frames to the next step
             h2 = torch.cat([h2, window[:, self.feature_dim:]], 1)
             c2 = torch.cat([c2, torch.zeros(1, self.buffer_size)], 1)
-        return mean, std, h2.view(-1), c2.view(-1), attention, variance_factor
+        return mean, std, h2.view(-1), c2.view(-1), r, variance_factor, query, weights
 
 
 def script_policy(model: Cchp) -> torch.jit.ScriptModule:

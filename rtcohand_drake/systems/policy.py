@@ -29,7 +29,9 @@ Input ports
 Output ports
   policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
-  attention        (K)  attention weights over the K context steps (mean over heads)
+  attention        (K)  attention weights over the K context steps (mean over heads), computed
+                        from the step's query only when the port is evaluated, so a period
+                        costs the same whatever the number of context steps
   read_variance    (1)  the read's predictive variance factor v = 1 + phi^T A phi (>= 1): near 1 for a
                         gesture like the context's, larger for one unlike all of them (the
                         supervisor slows down for it); 1 for a model without the Bayesian linear read
@@ -61,13 +63,13 @@ class Policy:
     correction_weight: float = 1.0
 
 
-def blended_output(mean, attention, values, correction_weight: float) -> np.ndarray:
-    """r + w (mean - r), r = attention . values (one head for all dimensions, or head d for dimension d)."""
+def blended_output(mean, read, correction_weight: float) -> np.ndarray:
+    """r + w (mean - r), `read` = attention . values: (6,), (1, 6), or (6, 6) with head d for dimension d."""
     mean = np.asarray(mean, float)
     if correction_weight == 1.0:
         return mean
-    r = np.asarray(attention, float) @ np.asarray(values, float)
-    r = np.diagonal(r) if r.ndim == 2 else r
+    r = np.asarray(read, float)
+    r = np.diagonal(r) if r.ndim == 2 and r.shape[0] == 6 else r.reshape(-1)
     return r + correction_weight * (mean - r)
 
 
@@ -88,6 +90,9 @@ class CchpPolicy(LeafSystem):
         else:  # an already loaded policy module
             self.module, self.model_path = model_path, getattr(model_path, "source_path", "")
         self._has_variance = hasattr(self.module, "step_with_variance")
+        # `step_read` (policy files exported with it) skips the pass over the context that only the
+        # attention needs; its query gives the attention on demand (`attention_of`).
+        self._has_read = hasattr(self.module, "step_read") and hasattr(self.module, "attention_of")
         x_c, y_c, mask = pack_context(context_pieces)
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(
@@ -96,6 +101,7 @@ class CchpPolicy(LeafSystem):
         self._values_np = self._values.numpy().astype(np.float64)
         self.z_mu, self.z_sigma = z_mu.numpy().astype(np.float64), z_sigma.numpy().astype(np.float64)
         self.context_steps = int(keys.shape[0])
+        self._query_size = int(self.module.query_size) if self._has_read else self.context_steps
         self._seed = int(seed)
         self.period_s = 1.0 / rate_hz
         H, Dz = int(self.module.hidden_size), int(self.module.latent_dim)
@@ -113,13 +119,14 @@ class CchpPolicy(LeafSystem):
         self._std = self.DeclareDiscreteState(np.zeros(6))
         self._z = self.DeclareDiscreteState(self.sample_z(0))
         self._resumes = self.DeclareDiscreteState(np.zeros(1))
-        self._attn = self.DeclareDiscreteState(np.zeros(self.context_steps))
+        self._query = self.DeclareDiscreteState(self._query_size)  # the attention itself for older files
         self._variance = self.DeclareDiscreteState(np.ones(1))
         self._out = self.DeclareDiscreteState(6)  # the twist output (module docstring)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(POLICY_MEAN, self._out)
         self.DeclareStateOutputPort(POLICY_STD, self._std)
-        self.DeclareStateOutputPort(ATTENTION, self._attn)
+        self.DeclareVectorOutputPort(ATTENTION, self.context_steps, self._calc_attention,
+                                     prerequisites_of_calc={self.discrete_state_ticket(self._query)})
         self.DeclareStateOutputPort(READ_VARIANCE, self._variance)
 
     def sample_z(self, resume_count: int) -> np.ndarray:
@@ -128,17 +135,36 @@ class CchpPolicy(LeafSystem):
         return self.z_mu + self.z_sigma * rng.standard_normal(self._Dz)
 
     def step(self, x, y_prev, h, c, z):
-        """One policy step in numpy: (mean, std, h, c, attention, v), all as the module gives them."""
+        """One policy step in numpy: (mean, std, h, c, read, v, query). `read` is the context read
+        attention . values ((heads, 6), m/s and rad/s); `query` gives the attention through
+        `attention(query)` (for a policy file without `step_read`, it is the attention)."""
         torch = self._torch
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
         args = (f32(x), f32(y_prev), f32(h), f32(c), self._keys, self._values, f32(z))
         with torch.no_grad():
+            if self._has_read:
+                mean, std, h2, c2, read, v, query = self.module.step_read(*args)
+                return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), read.numpy(), float(v[0]), query.numpy()
             if self._has_variance:
                 mean, std, h2, c2, attn, v = self.module.step_with_variance(*args)
                 v = float(v[0])
             else:  # a policy file without the method: no variance to report
                 (mean, std, h2, c2, attn), v = self.module.step(*args), 1.0
-        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), attn.numpy(), v
+        attn = attn.numpy()
+        read = np.atleast_2d(attn) @ self._values_np
+        return mean.numpy(), std.numpy(), h2.numpy(), c2.numpy(), read, v, attn.mean(axis=0) if attn.ndim == 2 else attn
+
+    def attention(self, query) -> np.ndarray:
+        """The attention (K) over the context steps, mean over heads, of a step's query."""
+        if not self._has_read:
+            return np.asarray(query, float)
+        torch = self._torch
+        with torch.no_grad():
+            attn = self.module.attention_of(torch.from_numpy(np.asarray(query, dtype=np.float32)), self._keys).numpy()
+        return attn.mean(axis=0) if attn.ndim == 2 else attn
+
+    def _calc_attention(self, context, output):
+        output.SetFromVector(self.attention(context.get_discrete_state(self._query).get_value()))
 
     def _update(self, context, discrete_state):
         get = lambda i: context.get_discrete_state(i).get_value()
@@ -152,8 +178,8 @@ class CchpPolicy(LeafSystem):
                 discrete_state.set_value(self._z, z)
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
-        mean, std, h, c, attn, v = self.step(x, y_prev, h, c, z)
-        out = blended_output(mean, attn, self._values_np, self.correction_weight)
+        mean, std, h, c, read, v, query = self.step(x, y_prev, h, c, z)
+        out = blended_output(mean, read, self.correction_weight)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
@@ -165,4 +191,4 @@ class CchpPolicy(LeafSystem):
         discrete_state.set_value(self._out, out)
         discrete_state.set_value(self._std, std)
         discrete_state.set_value(self._variance, [v if np.isfinite(v) else np.inf])
-        discrete_state.set_value(self._attn, attn.mean(axis=0) if attn.ndim == 2 else attn)
+        discrete_state.set_value(self._query, np.where(np.isfinite(query), query, 0.0))
