@@ -110,12 +110,16 @@ class CchpPolicy(nn.Module):
         self.trunk = model.latent.trunk
         self.mu_head = model.latent.mu_head
         self.sigma_head = model.latent.sigma_head
+        # The softmax read's key/query projection; a 1-unit placeholder with the Bayesian linear read
+        # (which never runs it), set below.
         self.kq = model.attention.kq
         # The Bayesian linear read (CchpConfig.read "bayes_linear"): keys hold Phi A (K, d) and the
         # posterior covariance A (d, d) (`pack_blr_keys`), so a step reads r = a . values with
         # a = (Phi A) phi (one contiguous pass over K x d) and v = 1 + phi^T A phi in O(d^2).
         # A 1-unit placeholder projection otherwise; never run.
         self.bayes_linear = model.blr is not None
+        if self.bayes_linear:
+            self.kq = nn.Linear(1, 1)
         self.phi_proj = model.blr.proj if model.blr is not None else nn.Linear(1, 1)
         self.has_window_proj = model.blr is not None and model.blr.window_proj is not None
         self.window_proj = model.blr.window_proj if self.has_window_proj else nn.Linear(1, 1)
