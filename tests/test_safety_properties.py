@@ -10,13 +10,16 @@ corridor decides what passes: there the part must never touch the mold.
 
 The number of streams: RTCOHAND_PROPERTY_EXAMPLES (default 500, so the suite stays near 20 min on a 2-core machine);
 the soak runs 10,000 with `RTCOHAND_PROPERTY_EXAMPLES=10000 pytest tests/test_safety_properties.py`.
+RTCOHAND_PROPERTY_SHARD=N (a positive integer) draws the streams from hypothesis seed N instead of
+the fixed derandomized sequence, so a soak can run as shards in parallel processes (one per core),
+each with its own streams: for example shards 1 and 2 with 5,000 each.
 """
 
 import os
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -31,6 +34,7 @@ from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, POSITION_MEASURED, VELOCITY_COMMAND
 
 EXAMPLES = int(os.environ.get("RTCOHAND_PROPERTY_EXAMPLES", "500"))
+SHARD = int(os.environ.get("RTCOHAND_PROPERTY_SHARD", "0"))
 DURATION_S = 3.0
 RATE_HZ = 10.0
 KINDS = ("gesture", "nan", "inf", "huge", "frozen", "dropped", "jump", "flip", "silence")
@@ -143,8 +147,18 @@ segments_strategy = st.lists(
 pauses_strategy = st.lists(st.tuples(st.floats(0.0, DURATION_S), st.floats(0.2, 1.5)), max_size=2)
 
 
-@settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def _shard(test):
+    """The test's stream sequence: the fixed derandomized one, or that of hypothesis seed SHARD."""
+    return seed(SHARD)(test) if SHARD > 0 else test
+
+
+SETTINGS = dict(max_examples=EXAMPLES, deadline=None,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+SETTINGS.update(dict(derandomize=False, database=None) if SHARD > 0 else dict(derandomize=True))
+
+
+@_shard
+@settings(**SETTINGS)
 @given(segments=segments_strategy, pauses=pauses_strategy, seed=st.integers(0, 2**16),
        in_mold=st.sampled_from([False, False, False, True]))
 def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed, in_mold):
