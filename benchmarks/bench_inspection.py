@@ -69,24 +69,14 @@ def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
 
 def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     """The same task with `IntentPolicy` (the person's intended twist, delayed) in place of CCHP."""
-    from pydrake.systems.analysis import Simulator
-
-    from rtcohand_drake.diagram import build_run_diagram, collect_run_log
-    from rtcohand_drake.analysis.inspection import score_run_log
-    from rtcohand_drake.analysis.reference_policies import IntentPolicy
-    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+    from rtcohand_drake.analysis.reference_policies import run_intent_reference
     from rtcohand_drake.run_log import write_run_log
 
     scenario = load_scenario(args.scenario)
     if args.filter_mode:
         scenario.command_filter.mode = args.filter_mode
-    source, _ = make_builtin_person(scenario, seed=args.seed, user=user, population_seed=args.population_seed)
-    run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, args.intent_delay),
-                            gesture_source="intent")
-    simulator = Simulator(run.diagram)
-    simulator.AdvanceTo(args.duration)
-    log = collect_run_log(run, simulator.get_context(), scenario)
-    score_run_log(log, scenario)
+    log = run_intent_reference(scenario, user, seed=args.seed, population_seed=args.population_seed,
+                               delay_s=args.intent_delay, duration_s=args.duration)
     write_run_log(out / f"{user}.h5", log)
     return user, 0, ""
 

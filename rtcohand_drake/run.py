@@ -160,6 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rtcohand_drake.diagram import collect_run_log, peak_speeds
     from rtcohand_drake.analysis.inspection import score_run_log
     from rtcohand_drake.run_log import write_run_log
+    from rtcohand_drake.systems.inspection_monitor import until_done
 
     meshcat = None
     if not args.no_meshcat:
@@ -188,7 +189,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if run.visualizer is not None:
         run.visualizer.StartRecording(set_transforms_while_recording=True)
     if stop_when_done:
-        simulator.set_monitor(_until_done(run, scenario.done_hold_s))
+        simulator.set_monitor(until_done(run.monitor, scenario.done_hold_s))
     simulator.Initialize()
     wall_start = time.perf_counter()
     interrupted = False
@@ -261,21 +262,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         except KeyboardInterrupt:
             pass
     return 130 if interrupted else 0
-
-
-def _until_done(run, hold_s: float):
-    """A simulator monitor that ends the run `hold_s` after the last face counted."""
-    from pydrake.systems.framework import EventStatus
-
-    monitor = run.monitor
-
-    def check(root):
-        done_at = monitor.inspected_at(monitor.GetMyContextFromRoot(root))
-        if np.all(np.isfinite(done_at)) and root.get_time() >= done_at.max() + hold_s - 1e-9:
-            return EventStatus.ReachedTermination(monitor, "all six faces inspected")
-        return EventStatus.DidNothing()
-
-    return check
 
 
 def entry_point() -> None:

@@ -227,3 +227,16 @@ def test_intent_policy_passes_the_intended_twist_on_late():
     # Sampled at t = 0.1 k; read out 3 periods (0.3 s) later; a NaN intent reads as zero.
     assert np.allclose(seen[3:, 0], 0.01 * np.arange(1, 6)) and np.allclose(seen[:3], 0.0)
     assert np.all(np.isfinite(seen))
+
+
+def test_intent_reference_run_stops_a_hold_after_the_sixth_face():
+    """The shared intent-reference run (the study's and bench_inspection's): the person's own intent
+    in place of the policy finishes the task, and with stop_when_done the run ends done_hold_s later."""
+    from rtcohand_drake.analysis.reference_policies import run_intent_reference
+    from rtcohand_drake.scenario import load_scenario
+
+    scenario = load_scenario("inspection")
+    log = run_intent_reference(scenario, "u12", seed=0, population_seed=0, stop_when_done=True)
+    assert log.completed and log.faces_inspected == 6
+    assert abs(log.extra_attrs["sim_duration_s"] - log.completion_time - scenario.done_hold_s) <= 0.05
+    assert log.extra_attrs["seed"] == 0

@@ -37,3 +37,29 @@ class IntentPolicy(LeafSystem):
 
     def _calc_mean(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._buffer).get_value()[:6])
+
+
+def run_intent_reference(scenario, user: str, *, seed: int = 0, population_seed: int = 0, delay_s: float = 0.3,
+                         duration_s: float | None = None, stop_when_done: bool = False):
+    """The inspection with `IntentPolicy` in place of CCHP, for the built-in simulated person `user`
+    of population `population_seed`: the scored run log (`diagram.collect_run_log`). It runs for
+    `duration_s` (default: the scenario's cap), or, with `stop_when_done`, until the scenario's hold
+    after the sixth face, as the run command does."""
+    from pydrake.systems.analysis import Simulator
+
+    from rtcohand_drake.analysis.inspection import score_run_log
+    from rtcohand_drake.diagram import build_run_diagram, collect_run_log
+    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+    from rtcohand_drake.systems.inspection_monitor import until_done
+
+    source, _ = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed)
+    run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, delay_s),
+                            gesture_source="intent")
+    simulator = Simulator(run.diagram)
+    if stop_when_done:
+        simulator.set_monitor(until_done(run.monitor, scenario.done_hold_s))
+    simulator.AdvanceTo(scenario.duration_s if duration_s is None else duration_s)
+    log = collect_run_log(run, simulator.get_context(), scenario)
+    score_run_log(log, scenario)
+    log.extra_attrs.update(seed=seed, sim_duration_s=simulator.get_context().get_time())
+    return log

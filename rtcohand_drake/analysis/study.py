@@ -66,27 +66,12 @@ def run_condition(population: int, user: str, condition: str, out: str, seed: in
 
 
 def _run_intent(population: int, user: str, log: Path, seed: int) -> None:
-    from pydrake.systems.analysis import Simulator
-
-    from rtcohand_drake.analysis.inspection import score_run_log
-    from rtcohand_drake.analysis.reference_policies import IntentPolicy
-    from rtcohand_drake.diagram import build_run_diagram, collect_run_log
-    from rtcohand_drake.run import _until_done
+    from rtcohand_drake.analysis.reference_policies import run_intent_reference
     from rtcohand_drake.run_log import write_run_log
     from rtcohand_drake.scenario import load_scenario
-    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
 
-    scenario = load_scenario("inspection")
-    source, _ = make_builtin_person(scenario, seed=seed, user=user, population_seed=population)
-    run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, 0.3),
-                            gesture_source="intent")
-    simulator = Simulator(run.diagram)
-    simulator.set_monitor(_until_done(run, scenario.done_hold_s))
-    simulator.AdvanceTo(scenario.duration_s)
-    result = collect_run_log(run, simulator.get_context(), scenario)
-    score_run_log(result, scenario)
-    result.extra_attrs.update(seed=seed, sim_duration_s=simulator.get_context().get_time())
-    write_run_log(log, result)
+    write_run_log(log, run_intent_reference(load_scenario("inspection"), user, seed=seed, population_seed=population,
+                                            stop_when_done=True))
 
 
 def summarise(path: str) -> dict:

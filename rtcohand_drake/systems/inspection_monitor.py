@@ -50,3 +50,16 @@ class InspectionMonitor(LeafSystem):
 
     def _calc_faces(self, context, output):
         output.SetFromVector(np.isfinite(self.inspected_at(context)).astype(float))
+
+
+def until_done(monitor: InspectionMonitor, hold_s: float):
+    """A simulator monitor (`Simulator.set_monitor`) that ends the run `hold_s` after the last face counted."""
+    from pydrake.systems.framework import EventStatus
+
+    def check(root):
+        done_at = monitor.inspected_at(monitor.GetMyContextFromRoot(root))
+        if np.all(np.isfinite(done_at)) and root.get_time() >= done_at.max() + hold_s - 1e-9:
+            return EventStatus.ReachedTermination(monitor, "all six faces inspected")
+        return EventStatus.DidNothing()
+
+    return check
