@@ -23,8 +23,7 @@ import argparse
 import numpy as np
 import torch
 
-from rtcohand_drake.analysis.context_reading import clips_from_file, play_clip
-from rtcohand_drake.data.sampling import pack_context
+from rtcohand_drake.analysis.context_reading import clips_from_file, held_out_means
 from rtcohand_drake.learning.policy_file import load_policy
 
 FULL_SCALE = np.array([0.25, 0.25, 0.25, 1.0, 1.0, 1.0])  # m/s and rad/s: twists on a common scale
@@ -59,20 +58,6 @@ def onsets(clip, out: np.ndarray, rate_hz: float = 10.0):
     return first(sign * clip.labels[:, d], 0.2), first(sign * out[:, d], 0.2), first(strength, 0.5)
 
 
-def held_out(module, clips, lead: int, folds: int = 6) -> list[np.ndarray]:
-    out: list = [None] * len(clips)
-    for f in range(folds):
-        context = [(c.features[: len(c.features) - lead], c.labels[lead:]) if lead else (c.features, c.labels)
-                   for i, c in enumerate(clips) if i % folds != f]
-        x_c, y_c, mask = pack_context(context)
-        with torch.no_grad():
-            keys, values, z, _ = module.encode_context(torch.from_numpy(x_c), torch.from_numpy(y_c),
-                                                       torch.from_numpy(mask))
-        for i in range(f, len(clips), folds):
-            out[i] = play_clip(module, clips[i].features, keys, values, z)
-    return out
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", required=True)
@@ -89,7 +74,7 @@ def main() -> None:
         zero = np.mean([np.mean(c.labels ** 2) for c in clips])
         delay = delay_estimate(clips)
         for lead in args.leads:
-            means = held_out(module, clips, lead)
+            means = held_out_means(module, clips, lead=lead)
             err = np.mean([np.mean((m - c.labels) ** 2) for m, c in zip(means, clips)]) / zero
             ons = [onsets(c, m) for c, m in zip(clips, means) if len(c.active_dims) == 1]
             med = [np.median([o[k] for o in ons if o[k] is not None]) * 1e3 for k in range(3)]

@@ -88,8 +88,11 @@ def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: 
 
 
 def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
-                   correction_weight: float = 1.0) -> list[np.ndarray]:
-    """The policy's output (T, 6) over every clip, each played with the other folds as context."""
+                   correction_weight: float = 1.0, lead: int = 0) -> list[np.ndarray]:
+    """The policy's output (T, 6) over every clip, each played with the other folds as context.
+
+    `lead` > 0 pairs each context frame with the label `lead` frames later (the context's last
+    `lead` frames and first `lead` labels dropped): a read of what the person will want."""
     import torch
 
     from rtcohand_drake.data.sampling import pack_context
@@ -99,7 +102,8 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
     folds = max(2, min(folds, len(clips)))
     means: list = [None] * len(clips)
     for f in range(folds):
-        x_c, y_c, mask = pack_context([(c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
+        x_c, y_c, mask = pack_context([(c.features[: len(c.features) - lead], c.labels[lead:]) if lead
+                                       else (c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
         with torch.no_grad():
             keys, values, z_mu, _ = module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
