@@ -153,3 +153,19 @@ def test_bayes_linear_needs_the_gesture_cell():
         Cchp(CchpConfig(read="bayes_linear"))
     with pytest.raises(ValueError):
         Cchp(CchpConfig(read="bayes_linear", key_source="gesture", attention_heads=6))
+
+
+def test_signed_square_gives_the_direction_of_an_asymmetric_stroke():
+    """A sweep whose fast stroke carries the sign: out fast, back slowly, so the frames sum to ~0
+    (no linear read sees the sign), while the sum of x |x| has the fast stroke's sign."""
+    from rtcohand_drake.learning.nets.cchp import signed_square_sum
+
+    fast, slow = np.full(3, 0.9), np.full(6, -0.45)  # 2.7 out, 2.7 back
+    stroke = np.zeros((9, 36), np.float32)
+    stroke[:, 7] = np.concatenate([fast, slow])
+    window = torch.from_numpy(stroke.reshape(1, -1))
+    assert abs(float(window.view(9, 36)[:, 7].sum())) < 1e-5
+    forward = signed_square_sum(window)[0]
+    backward = signed_square_sum(-window)[0]
+    assert float(forward[7]) > 1.0 and float(backward[7]) < -1.0
+    assert torch.count_nonzero(forward) == 1

@@ -21,10 +21,10 @@ def _clip(rng, n):
     return rng.normal(size=(n, 36)).astype(np.float32) * 0.3, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
 
 
-def _model(heads=1, key_source="state", kernel="dot", read_skip=False, read="attention", window=0):
+def _model(heads=1, key_source="state", kernel="dot", read_skip=False, read="attention", window=0, square=False):
     torch.manual_seed(0)
     model = Cchp(CchpConfig(attention_heads=heads, key_source=key_source, attention_kernel=kernel,
-                            read_skip=read_skip, read=read, phi_window=window)).eval()
+                            read_skip=read_skip, read=read, phi_window=window, phi_signed_square=square)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     return model
 
@@ -46,13 +46,14 @@ def _run_policy(policy, target_x, context, z=None):
     return torch.stack(means), atts, (keys, values, z_mu, z_sigma)
 
 
-@pytest.mark.parametrize("heads,key_source,kernel,skip,read,window", [
-    (1, "state", "dot", False, "attention", 0), (6, "state", "dot", False, "attention", 0),
-    (1, "gesture", "dot", False, "attention", 0), (1, "gesture", "distance", True, "attention", 0),
-    (6, "gesture", "distance", True, "attention", 0), (1, "gesture", "distance", True, "bayes_linear", 0),
-    (1, "gesture", "distance", True, "bayes_linear", 10)])
-def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, skip, read, window):
-    model = _model(heads, key_source, kernel, skip, read, window)
+@pytest.mark.parametrize("heads,key_source,kernel,skip,read,window,square", [
+    (1, "state", "dot", False, "attention", 0, False), (6, "state", "dot", False, "attention", 0, False),
+    (1, "gesture", "dot", False, "attention", 0, False), (1, "gesture", "distance", True, "attention", 0, False),
+    (6, "gesture", "distance", True, "attention", 0, False), (1, "gesture", "distance", True, "bayes_linear", 0, False),
+    (1, "gesture", "distance", True, "bayes_linear", 10, False),
+    (1, "gesture", "distance", True, "bayes_linear", 10, True)])
+def test_whole_clip_matches_python_model(tmp_path, heads, key_source, kernel, skip, read, window, square):
+    model = _model(heads, key_source, kernel, skip, read, window, square)
     rng = np.random.default_rng(heads)
     target = _clip(rng, 45)
     context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]

@@ -124,6 +124,7 @@ class CchpPolicy(nn.Module):
         self.has_window_proj = model.blr is not None and model.blr.window_proj is not None
         self.window_proj = model.blr.window_proj if self.has_window_proj else nn.Linear(1, 1)
         self.phi_raw = bool(model.blr.raw) if model.blr is not None else False
+        self.phi_signed_square = bool(model.blr.signed_square) if model.blr is not None else False
         self.phi_dim = int(model.blr.dim) if model.blr is not None else 0
         self.blr_lambda = float(model.blr.lam.detach()) if model.blr is not None else 1.0
         if model.blr is not None:
@@ -168,6 +169,9 @@ class CchpPolicy(nn.Module):
             parts.append(x_n)
         if self.has_window_proj:
             parts.append(self.window_proj(window))
+        if self.phi_signed_square:
+            frames = window.view(window.size(0), -1, self.feature_dim)
+            parts.append((frames * frames.abs()).sum(1))
         parts.append(torch.ones(g.size(0), 1))
         return torch.cat(parts, 1)
 

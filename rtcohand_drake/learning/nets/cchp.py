@@ -72,6 +72,10 @@ class CchpConfig:
     # the normalised features (0: none); the exported step carries those frames in its state.
     phi_window: int = 0
     phi_window_size: int = 64
+    # phi also holds the sum over those phi_window frames of x |x| (36, elementwise; no parameters):
+    # the direction of an asymmetric stroke, such as a finger sweep whose fast stroke carries the
+    # sign, which no linear function of the frames shows (their sum over a back-and-forth is ~0).
+    phi_signed_square: bool = False
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
@@ -202,6 +206,12 @@ class ContextAttention(nn.Module):
         return torch.matmul(weights, values), weights
 
 
+def signed_square_sum(window: torch.Tensor) -> torch.Tensor:
+    """(.., W * 36) frames (oldest first) -> (.., 36): the sum over the W frames of x |x|."""
+    frames = window.reshape(window.shape[:-1] + (-1, FEATURE_DIM))
+    return (frames * frames.abs()).sum(-2)
+
+
 class BayesLinearRead(nn.Module):
     """The context read as a Bayesian linear regression over learned gesture features.
 
@@ -224,8 +234,9 @@ class BayesLinearRead(nn.Module):
         self.raw = cfg.phi_raw
         self.window = cfg.phi_window
         self.window_proj = nn.Linear(cfg.phi_window * FEATURE_DIM, cfg.phi_window_size) if cfg.phi_window else None
+        self.signed_square = bool(cfg.phi_signed_square)
         self.dim = (cfg.phi_size + (FEATURE_DIM if cfg.phi_raw else 0) + 1
-                    + (cfg.phi_window_size if cfg.phi_window else 0))
+                    + (cfg.phi_window_size if cfg.phi_window else 0) + (FEATURE_DIM if self.signed_square else 0))
         self.log_lambda = nn.Parameter(torch.tensor(math.log(cfg.blr_lambda)))
 
     @property
@@ -238,6 +249,8 @@ class BayesLinearRead(nn.Module):
         parts = [self.proj(g)] + ([x_n] if self.raw else [])
         if self.window_proj is not None:
             parts.append(self.window_proj(window))
+        if self.signed_square:
+            parts.append(signed_square_sum(window))
         return torch.cat(parts + [torch.ones_like(g[..., :1])], -1)
 
     def windows(self, x_n: torch.Tensor) -> Optional[torch.Tensor]:
@@ -320,6 +333,8 @@ class Cchp(nn.Module):
             raise ValueError(f"read must be 'attention' or 'bayes_linear', got {self.cfg.read!r}")
         if self.cfg.read == "bayes_linear" and (self.cfg.key_source != "gesture" or self.cfg.attention_heads != 1):
             raise ValueError("read 'bayes_linear' needs key_source 'gesture' and one attention head")
+        if self.cfg.phi_signed_square and not (self.cfg.read == "bayes_linear" and self.cfg.phi_window > 0):
+            raise ValueError("phi_signed_square needs read 'bayes_linear' and phi_window > 0")
         self.normalizer = Normalizer()
         self.cell = EncoderCell(self.cfg)
         self.latent = LatentEncoder(self.cfg)
