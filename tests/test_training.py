@@ -119,3 +119,20 @@ def test_torchrun_two_processes_on_gloo(tiny_data, tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     payload = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
     assert payload["meta"]["world_size"] == 2 and payload["step"] == 3
+
+
+def test_init_from_a_checkpoint(tiny_data, trained, tmp_path):
+    """--init-from starts from a checkpoint's weights (with --lr 0 they come out unchanged); a
+    checkpoint of another model kind is a one-line error."""
+    from rtcohand_drake.learning.checkpoint import load_checkpoint
+
+    args = ("rtcohand_drake.train", "--data", str(tiny_data), "--model", "cchp", "--lr", "0", *TRAIN_ARGS)
+    run = _run(*args, "--out", str(tmp_path / "warm"), "--init-from", str(trained["cchp"]))
+    assert run.returncode == 0, run.stderr
+    source, _ = load_checkpoint(trained["cchp"])
+    warm, _ = load_checkpoint(tmp_path / "warm" / "checkpoint.pt")
+    for name, value in source.state_dict().items():
+        assert torch.equal(value, warm.state_dict()[name]), name
+    run = _run(*args, "--out", str(tmp_path / "bad"), "--init-from", str(trained["ranp"]))
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1 and "ranp" in lines[0], run.stderr

@@ -70,6 +70,9 @@ class TrainConfig:
     log_every: int = 10
     threads: int = 1  # torch intra-op threads per process (0: torch default); the step loop is overhead-bound
     max_minutes: float = 0.0  # stop early (and save) after this wall time; 0: no limit
+    # Start from this checkpoint's weights (a model of the same kind whose parameters have the same
+    # names and shapes, for example one trained without a parameter-free option); "": from scratch.
+    init_from: str = ""
 
     def p_tf(self, step: int) -> float:
         """Teacher-forcing probability at a step (0-based)."""
@@ -180,6 +183,23 @@ def init_distributed() -> tuple:
 # --------------------------------------------------------------------------- training
 
 
+def init_from_checkpoint(model: nn.Module, path: str) -> None:
+    """Load a checkpoint's learned weights into `model` (the data's normalisation scales are kept)."""
+    from rtcohand_drake.learning.checkpoint import load_checkpoint
+
+    source, payload = load_checkpoint(path)
+    if payload["kind"] != getattr(model, "kind", None):
+        raise InputError(f"{path}: --init-from needs a {model.kind} checkpoint, this one holds {payload['kind']!r}")
+    state = {k: v for k, v in source.state_dict().items() if not k.startswith("normalizer.")}
+    try:
+        model.load_state_dict(state, strict=False)
+    except RuntimeError as err:
+        raise InputError(f"{path}: its weights do not fit this model ({str(err).splitlines()[0]})") from None
+    missing = set(model.state_dict()) - set(state) - {k for k in model.state_dict() if k.startswith("normalizer.")}
+    if missing:
+        raise InputError(f"{path}: it has no weights for {', '.join(sorted(missing)[:3])}")
+
+
 def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = None, quiet: bool = False) -> Dict:
     """Train and return the history. Rank 0 writes the outputs under `out`."""
     rank, world, device = init_distributed()
@@ -191,6 +211,8 @@ def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = 
     model = build_model(cfg.model, model_config)
     f_scale, l_scale = data_scales(train_clips)
     model.normalizer.set_scales(f_scale, l_scale)
+    if cfg.init_from:
+        init_from_checkpoint(model, cfg.init_from)
     model.to(device)
     net: nn.Module = model
     if world > 1:
@@ -348,6 +370,7 @@ _FLAG_HELP = {
     "readout_weight": "CCHP: weight of a loss on the context read r(t) itself predicting the twist (0: off)",
     "threads": "torch threads per process (0: default)",
     "max_minutes": "stop and save after this wall time",
+    "init_from": "start from this checkpoint's weights (same model kind and parameter shapes)",
 }
 _FLAG_TYPE = {"tf_schedule": parse_tf_schedule}
 
