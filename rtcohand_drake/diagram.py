@@ -173,6 +173,17 @@ def _log_arrays(sink: VectorLogSink, root: Context):
     return log.sample_times().copy(), log.data().T.copy()
 
 
+def _log_group(run: "RunDiagram", root: Context, names) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The logs of sinks that publish on one clock: their times and data, cut to the shortest.
+
+    A run stopped from outside (Ctrl-C, a lost connection) can end between two sinks'
+    publishes of the same instant, so one log may hold a sample more than the others.
+    """
+    logs = [_log_arrays(run.loggers[name], root) for name in names]
+    n = min(len(t) for t, _ in logs)
+    return logs[0][0][:n], [data[:n] for _, data in logs]
+
+
 def _transition_events(log: RunLog, times, codes, describe) -> None:
     previous = None
     for t, code in zip(times, codes):
@@ -187,21 +198,20 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
     """Turns the log sinks' contents into a RunLog, with safety and IK events."""
     log = RunLog(scenario=scenario.name, gesture_source=run.gesture_source,
                  model=getattr(run.policy, "model_path", "") if run.policy is not None else "")
-    log.robot_time, log.robot_q = _log_arrays(run.loggers["robot_q"], root_context)
-    _, log.robot_v = _log_arrays(run.loggers["robot_v"], root_context)
-    _, log.robot_workpiece_pose = _log_arrays(run.loggers["robot_workpiece_pose"], root_context)
-    log.command_time, log.command_twist = _log_arrays(run.loggers["command_twist"], root_context)
-    _, log.command_speed_scale = _log_arrays(run.loggers["speed_scale"], root_context)
-    log.command_speed_scale = log.command_speed_scale[:, 0]
+    log.robot_time, (log.robot_q, log.robot_v, log.robot_workpiece_pose) = _log_group(
+        run, root_context, ("robot_q", "robot_v", "robot_workpiece_pose"))
+    log.command_time, (log.command_twist, speed_scale) = _log_group(
+        run, root_context, ("command_twist", "speed_scale"))
+    log.command_speed_scale = speed_scale[:, 0]
     if "policy_mean" in run.loggers:
-        log.policy_time, log.policy_mean = _log_arrays(run.loggers["policy_mean"], root_context)
-        _, log.policy_std = _log_arrays(run.loggers["policy_std"], root_context)
-        if "read_variance" in run.loggers:
-            _, variance = _log_arrays(run.loggers["read_variance"], root_context)
-            log.policy_read_variance = variance[:, 0]
-    log.gesture_time, status = _log_arrays(run.loggers["gesture_status"], root_context)
+        names = ("policy_mean", "policy_std") + (("read_variance",) if "read_variance" in run.loggers else ())
+        log.policy_time, policy = _log_group(run, root_context, names)
+        log.policy_mean, log.policy_std = policy[:2]
+        if len(policy) > 2:
+            log.policy_read_variance = policy[2][:, 0]
+    log.gesture_time, (status, log.gesture_keypoints) = _log_group(
+        run, root_context, ("gesture_status", "gesture_keypoints"))
     log.gesture_valid, log.gesture_frame_time = status[:, 0], status[:, 1]
-    _, log.gesture_keypoints = _log_arrays(run.loggers["gesture_keypoints"], root_context)
 
     t, status = _log_arrays(run.loggers["safety_status"], root_context)
     modes = status[:, 0].round().astype(int)

@@ -177,6 +177,33 @@ def test_a_new_zone_rule_is_one_function_and_one_row(monkeypatch):
     assert any(e.kind == "no_climbing" for e in log.events)
 
 
+def test_a_run_stopped_between_two_publishes_still_gives_a_consistent_log():
+    """Ctrl-C can land after one sink of a clock has published and before the next has:
+    the run log cuts that clock's logs to the samples they all hold, and scores."""
+    from pydrake.systems.analysis import Simulator
+
+    from rtcohand_drake.analysis.inspection import score_run_log
+    from rtcohand_drake.diagram import build_run_diagram, collect_run_log
+
+    scenario = load_scenario("inspection")
+    run = build_run_diagram(scenario)
+    simulator = Simulator(run.diagram)
+    simulator.AdvanceTo(0.25)
+    root = simulator.get_context()
+    full = collect_run_log(run, root, scenario)
+    for name in ("robot_q", "command_twist", "gesture_status"):  # one sink ahead of the others on its clock
+        sink_log = run.loggers[name].FindMutableLog(root)
+        sink_log.AddData(sink_log.sample_times()[-1] + 0.01, sink_log.data()[:, -1])
+    torn = collect_run_log(run, root, scenario)
+    assert len(torn.robot_time) == len(torn.robot_q) == len(torn.robot_workpiece_pose) == len(full.robot_time)
+    assert len(torn.command_time) == len(torn.command_twist) == len(torn.command_speed_scale) == len(full.command_time)
+    assert len(torn.gesture_time) == len(torn.gesture_keypoints) == len(full.gesture_time)
+    np.testing.assert_array_equal(torn.robot_q, full.robot_q)
+    score_run_log(full, scenario)
+    score_run_log(torn, scenario)
+    assert (torn.completed, torn.faces_inspected) == (full.completed, full.faces_inspected)
+
+
 def _mold_cavity_half_xy(sdf: pathlib.Path) -> tuple[float, float]:
     """The cavity's half extents from the mold's wall boxes (inner faces)."""
     walls = {}
