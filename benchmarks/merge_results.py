@@ -3,37 +3,40 @@
     python benchmarks/merge_results.py A/results.json B/results.json [...]
 
 Each cell: MSE mean ± std over seeds, and its share of commanding zero twist.
+The zero-twist and ridge rows come from the first file; the files must agree
+on the data, the episode seed and the episodes per setting.
 """
+
 import json
+import pathlib
 import sys
 
+from rtcohand_drake.data.sampling import ALL_SETTINGS
 
-def main(paths):
-    docs = [json.load(open(p)) for p in paths]
-    settings = ["D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy", "Own"]
-    ref = docs[0]["reference"]
-    for d in docs[1:]:
-        for s in settings:
-            a, b = d["reference"]["zero_twist_mse"].get(s), ref["zero_twist_mse"].get(s)
-            assert a is None or b is None or abs(a - b) < 1e-12, (s, a, b)
-    zero = ref["zero_twist_mse"]
-    rows = []
-    for d in docs:
-        for name, m in d["models"].items():
+
+def merged_table(results: list[dict]) -> str:
+    first = results[0]
+    for other in results[1:]:
+        for key in ("data", "seed", "episodes"):
+            if other[key] != first[key]:
+                raise SystemExit(f"merge_results: the files differ in {key!r}: {first[key]} against {other[key]}")
+    zero = first["reference"]["zero_twist_mse"]
+    ridge = first["reference"]["ridge_mse"]
+    settings = [s for s in ALL_SETTINGS if s in zero]
+    lines = ["| model | seeds | " + " | ".join(settings) + " |", "|---|---|" + "---|" * len(settings)]
+    for result in results:
+        for name, model in result["models"].items():
             cells = []
             for s in settings:
-                r = m["settings"].get(s)
+                r = model["settings"].get(s)
                 cells.append("-" if r is None else f"{r['mse']:.4f} ± {r['mse_std']:.4f} ({r['mse'] / zero[s]:.2f}x)")
-            rows.append(f"| {name} | {m['seeds']} | " + " | ".join(cells) + " |")
-    rows.append("| ridge fitted to the context (reference) | - | " + " | ".join(
-        f"{ref['ridge_mse'][s]:.4f} ({ref['ridge_mse'][s] / zero[s]:.2f}x)" for s in settings) + " |")
-    rows.append("| zero twist | - | " + " | ".join(f"{zero[s]:.4f}" for s in settings) + " |")
-    print("| model | seeds | " + " | ".join(settings) + " |")
-    print("|---|---|" + "---|" * len(settings))
-    print("\n".join(rows))
-    print()
-    print("Episodes per setting: " + ", ".join(f"{s} {docs[0]['episodes'][s]}" for s in settings))
+            lines.append(f"| {name} | {model['seeds']} | " + " | ".join(cells) + " |")
+    lines.append("| ridge fitted to the context (reference) | - | " + " | ".join(
+        f"{ridge[s]:.4f} ({ridge[s] / zero[s]:.2f}x)" for s in settings) + " |")
+    lines.append("| zero twist | - | " + " | ".join(f"{zero[s]:.4f}" for s in settings) + " |")
+    lines += ["", "Episodes per setting: " + ", ".join(f"{s} {first['episodes'][s]}" for s in settings)]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    print(merged_table([json.loads(pathlib.Path(p).read_text()) for p in sys.argv[1:]]))
