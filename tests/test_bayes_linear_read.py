@@ -13,10 +13,10 @@ def _clip(rng, n, scale=0.3):
     return rng.normal(size=(n, 36)).astype(np.float32) * scale, rng.normal(size=(n, 6)).astype(np.float32) * 0.1
 
 
-def _model(window=10):
+def _model(window=10, **options):
     torch.manual_seed(3)
     model = Cchp(CchpConfig(key_source="gesture", attention_kernel="distance", read_skip=True,
-                            read="bayes_linear", phi_window=window)).eval()
+                            read="bayes_linear", phi_window=window, **options)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     return model
 
@@ -52,9 +52,26 @@ def _phis(model, x, fed_back):
     return torch.stack(phis).double().numpy()
 
 
-def test_read_is_the_closed_form_posterior_mean():
-    """r(t) = phi(t)^T (Phi^T Phi + lambda I)^-1 Phi^T Y, solved here in float64 numpy."""
-    model = _model()
+SIGNED_SQUARE_IN_CONTEXT = {"phi_signed_square": True, "phi_signed_square_prior": "context",
+                            "phi_signed_square_prior_weight": 3.0}
+
+
+def _prior(model, Phi):
+    """The prior precision, here: lambda, and on the signed-square block (the 36 features before
+    the constant) lambda * weight * that feature's mean square over the context."""
+    lam = float(model.blr.lam.detach())
+    prior = np.full(Phi.shape[1], lam)
+    if model.cfg.phi_signed_square and model.cfg.phi_signed_square_prior == "context":
+        d = Phi.shape[1]
+        block = slice(d - 1 - 36, d - 1)
+        prior[block] = lam * model.cfg.phi_signed_square_prior_weight * (Phi[:, block] ** 2).mean(0)
+    return prior
+
+
+@pytest.mark.parametrize("options", [{}, SIGNED_SQUARE_IN_CONTEXT], ids=["fixed prior", "signed square, context prior"])
+def test_read_is_the_closed_form_posterior_mean(options):
+    """r(t) = phi(t)^T (Phi^T Phi + Lambda)^-1 Phi^T Y, solved here in float64 numpy."""
+    model = _model(**options)
     rng = np.random.default_rng(0)
     context = [_clip(rng, 40), _clip(rng, 31), _clip(rng, 17)]
     target = _clip(rng, 25)[0]
@@ -64,8 +81,7 @@ def test_read_is_the_closed_form_posterior_mean():
     d = policy.phi_dim
     Phi = np.concatenate([_phis(model, x, y) for x, y in context])  # the context features, here
     Y = values.double().numpy() / model.normalizer.label_scale.double().numpy()
-    lam = float(model.blr.lam.detach())
-    gram = Phi.T @ Phi + lam * np.eye(d)
+    gram = Phi.T @ Phi + np.diag(_prior(model, Phi))
     A = np.linalg.inv(gram)
     assert keys.shape == (len(Phi), d + -(-(d * d + 6 * d) // len(Phi)))
     phi_a, a_packed, w_packed = unpack_blr_keys(keys, d)
@@ -169,3 +185,50 @@ def test_signed_square_gives_the_direction_of_an_asymmetric_stroke():
     backward = signed_square_sum(-window)[0]
     assert float(forward[7]) > 1.0 and float(backward[7]) < -1.0
     assert torch.count_nonzero(forward) == 1
+
+
+def test_training_fit_is_the_same_closed_form_as_the_export():
+    """BayesLinearRead.fit (what training differentiates through) gives numpy's W and A, with the
+    context-scaled prior on the signed-square block and padded steps masked out."""
+    model = _model(**SIGNED_SQUARE_IN_CONTEXT)
+    rng = np.random.default_rng(1)
+    d = model.blr.dim
+    phi = rng.normal(size=(2, 50, d))
+    phi[..., d - 1 - 36 : d - 1] *= rng.uniform(0.01, 5.0, size=36)  # scales a hundredfold apart
+    y = rng.normal(size=(2, 50, 6))
+    mask = np.ones((2, 50), bool)
+    mask[1, 37:] = False
+    W, A = model.blr.fit(torch.from_numpy(phi), torch.from_numpy(y), torch.from_numpy(mask))
+    for b in range(2):
+        P, Y = phi[b][mask[b]], y[b][mask[b]]
+        gram = P.T @ P + np.diag(_prior(model, P))
+        np.testing.assert_allclose(A[b].detach().numpy(), np.linalg.inv(gram), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(W[b].detach().numpy(), np.linalg.solve(gram, P.T @ Y), rtol=1e-6, atol=1e-9)
+
+
+def test_context_prior_reads_the_signed_square_whatever_its_scale():
+    """With the context prior, the read of a signed-square feature does not depend on that
+    feature's units (it is the ridge on the standardised feature); with the fixed prior, a feature
+    of small scale is shrunk to nothing."""
+    rng = np.random.default_rng(2)
+    reads = {}
+    for prior in ("fixed", "context"):
+        model = _model(phi_signed_square=True, phi_signed_square_prior=prior)
+        d = model.blr.dim
+        k = d - 1 - 36  # the first signed-square feature carries the label, at two scales
+        for scale in (1.0, 0.01):
+            phi = rng.normal(size=(1, 400, d)) * 0.01
+            s = rng.normal(size=400)
+            phi[0, :, k] = s * scale
+            y = np.zeros((1, 400, 6))
+            y[0, :, 0] = s
+            W, _ = model.blr.fit(torch.from_numpy(phi), torch.from_numpy(y), torch.ones(1, 400, dtype=torch.bool))
+            reads[prior, scale] = float(W.detach()[0, k, 0]) * scale  # the read of a unit of the label's signal
+    assert reads["context", 1.0] == pytest.approx(reads["context", 0.01], rel=1e-3)
+    assert reads["context", 0.01] > 0.9
+    assert reads["fixed", 0.01] < 0.1
+
+
+def test_unknown_signed_square_prior_is_refused():
+    with pytest.raises(ValueError, match="phi_signed_square_prior"):
+        _model(phi_signed_square=True, phi_signed_square_prior="learned")

@@ -132,6 +132,74 @@ def test_export_cli_and_bad_files(tmp_path):
         load_policy(truncated)
 
 
+def test_context_prior_export_matches_python_model():
+    """The signed-square block with its prior scaled by the context: the export computes what the model does."""
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(key_source="gesture", attention_kernel="distance", read_skip=True, read="bayes_linear",
+                            phi_window=10, phi_signed_square=True, phi_signed_square_prior="context",
+                            phi_signed_square_prior_weight=3.0)).eval()
+    model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
+    rng = np.random.default_rng(5)
+    target = _clip(rng, 45)
+    context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]
+    ref = model.predict(collate([target], [context]))["mean"][0]
+    means, _, _ = _run_policy(script_policy(model), target[0], context)
+    assert torch.allclose(means, ref, atol=1e-5), (means - ref).abs().max()
+
+
+def _card(model):
+    return {"kind": "cchp", "model_config": model.cfg.to_dict(), "train_config": {}, "step": 7, "meta": {}}
+
+
+@pytest.mark.parametrize("heads,key_source,read,window", [
+    (1, "state", "attention", 0), (6, "gesture", "attention", 0), (1, "gesture", "bayes_linear", 10)])
+def test_policy_rebuilt_from_its_file_computes_what_the_file_computes(tmp_path, heads, key_source, read, window):
+    from rtcohand_drake.learning.export import cchp_from_policy, export_model
+
+    model = _model(heads, key_source, "distance", True, read, window)
+    path = export_model(model, _card(model), tmp_path / "policy.pt")
+    rebuilt, card = cchp_from_policy(path)
+    assert card["step"] == 7
+    rebuilt_state = rebuilt.state_dict()
+    for name, value in model.state_dict().items():
+        if not (read == "bayes_linear" and name.startswith("attention.")):  # a key projection that read never runs
+            assert torch.equal(value, rebuilt_state[name]), name
+    rng = np.random.default_rng(2)
+    target, context = _clip(rng, 30), [_clip(rng, 25), _clip(rng, 19)]
+    original, _, _ = _run_policy(load_policy(path), target[0], context)
+    again, _, _ = _run_policy(script_policy(rebuilt), target[0], context)
+    assert torch.equal(original, again)
+
+
+def test_export_from_policy_cli_changes_the_read_and_refuses_a_shape_change(tmp_path):
+    from rtcohand_drake.learning.export import export_model, read_model_card
+
+    model = _model(1, "gesture", "distance", True, "bayes_linear", 10)
+    src = export_model(model, _card(model), tmp_path / "policy.pt")
+    out = tmp_path / "ssq.pt"
+    cli = [sys.executable, "-m", "rtcohand_drake.export", "--from-policy", str(src)]
+    run = subprocess.run(cli + ["--set", "phi_signed_square=true", "--set", "phi_signed_square_prior=context",
+                                "--out", str(out)], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    card = read_model_card(out)
+    assert card["model_config"]["phi_signed_square_prior"] == "context"
+    assert card["meta"]["derived_from"] == {"policy": "policy.pt", "set": {"phi_signed_square": True,
+                                                                          "phi_signed_square_prior": "context"}}
+    assert load_policy(out).phi_dim == load_policy(src).phi_dim + 36
+    # The derived file is the model with that option: the same as building it in Python.
+    derived = Cchp(CchpConfig(**card["model_config"])).eval()
+    derived.load_state_dict(model.state_dict())
+    rng = np.random.default_rng(3)
+    target, context = _clip(rng, 30), [_clip(rng, 25), _clip(rng, 19)]
+    ref = derived.predict(collate([target], [context]))["mean"][0]
+    means, _, _ = _run_policy(load_policy(out), target[0], context)
+    assert torch.allclose(means, ref, atol=1e-5)
+    for bad in (["--set", "phi_size=32"], ["--set", "no_such_option=1"], ["--set", "oops"]):
+        run = subprocess.run(cli + bad + ["--out", str(tmp_path / "x.pt")], capture_output=True, text=True)
+        assert run.returncode == 2, run.stderr
+        assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
+
+
 @pytest.mark.skipif(not SHIPPED.exists(), reason="models/cchp_default.pt not built yet")
 def test_shipped_policy_loads_and_steps():
     assert SHIPPED.stat().st_size < 5_000_000

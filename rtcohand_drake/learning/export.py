@@ -45,7 +45,7 @@ from torch import nn
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.nets.blocks import FEATURE_DIM, MOTION_DIM
-from rtcohand_drake.learning.nets.cchp import Cchp
+from rtcohand_drake.learning.nets.cchp import Cchp, blr_prior_precision
 from rtcohand_drake.learning.checkpoint import load_checkpoint
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
@@ -127,6 +127,9 @@ class CchpPolicy(nn.Module):
         self.phi_signed_square = bool(model.blr.signed_square) if model.blr is not None else False
         self.phi_dim = int(model.blr.dim) if model.blr is not None else 0
         self.blr_lambda = float(model.blr.lam.detach()) if model.blr is not None else 1.0
+        self.ssq_start = int(model.blr.ssq_start) if model.blr is not None else 0
+        self.ssq_stop = int(model.blr.ssq_stop) if model.blr is not None else 0
+        self.ssq_prior_weight = float(model.blr.ssq_prior_weight) if model.blr is not None else 0.0
         if model.blr is not None:
             self.key_size = self.phi_dim  # Phi A's width; D = d + ceil((d^2 + 6 d) / K) in all (pack_blr_keys)
         # The size of `step_read`'s query, from which `attention_of` gives the attention: phi (d) for the
@@ -209,7 +212,9 @@ class CchpPolicy(nn.Module):
             else:
                 win = torch.zeros(1, 1)
             phi = self._phi(h_all[:, self.cell_size:self.state_size], x[mask], win)  # (K, d)
-            gram = torch.mm(phi.t(), phi) + self.blr_lambda * torch.eye(self.phi_dim)
+            prior = blr_prior_precision(phi, torch.ones(phi.size(0), 1), torch.tensor(self.blr_lambda),
+                                        self.ssq_start, self.ssq_stop, self.ssq_prior_weight)
+            gram = torch.mm(phi.t(), phi) + torch.diag(prior)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
             phi_a = torch.mm(phi, A)
             keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), y_valid))  # (K, d + ceil((d^2 + 6 d) / K))
@@ -357,7 +362,6 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
     model, payload = load_checkpoint(checkpoint)
     if payload["kind"] != "cchp":
         raise InputError(f"{checkpoint}: only CCHP checkpoints can be exported, this one holds {payload['kind']!r}")
-    scripted = script_policy(model)
     card = {
         "kind": payload["kind"],
         "model_config": payload["model_config"],
@@ -365,6 +369,75 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
         "step": payload.get("step"),
         "meta": payload.get("meta", {}),
     }
+    return export_model(model, card, out)
+
+
+def read_model_card(path: os.PathLike) -> dict:
+    """The JSON model card an exported policy carries (`export_checkpoint`)."""
+    extra = {"model_card.json": ""}
+    load_policy(path)  # a clear error for a missing or wrong file first
+    torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
+    if not extra["model_card.json"]:
+        raise InputError(f"{path}: the policy file has no model card")
+    return json.loads(extra["model_card.json"])
+
+
+def cchp_from_policy(path: os.PathLike, overrides: Optional[dict] = None) -> Tuple[Cchp, dict]:
+    """The CCHP model (eval mode) an exported policy file was made from, and its model card.
+
+    `overrides` changes model options that hold no parameters (how the context is read, for
+    example `phi_signed_square_prior`); an option that changes a weight's shape is an InputError.
+    The rebuilt model exports to a policy that computes what the file computes (tested)."""
+    from rtcohand_drake.learning.checkpoint import build_model
+
+    card = read_model_card(path)
+    if card.get("kind") != "cchp":
+        raise InputError(f"{path}: only CCHP policies can be rebuilt, this one is {card.get('kind')!r}")
+    module = torch.jit.load(str(path), map_location="cpu")
+    config = {**card["model_config"], **(overrides or {})}
+    try:
+        model = build_model("cchp", config)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"{path}: cannot rebuild with {overrides}: {err}") from None
+    state = {k: v for k, v in module.state_dict().items()}
+    pairs = [("fingers", model.cell.fingers.net), ("hand", model.cell.hand), ("lstm", model.cell.lstm),
+             ("aggregate", model.latent.aggregate), ("trunk", model.latent.trunk), ("mu_head", model.latent.mu_head),
+             ("sigma_head", model.latent.sigma_head)]
+    if model.cell.gesture is not None:
+        pairs.append(("gesture", model.cell.gesture))
+    if model.blr is not None:
+        pairs.append(("phi_proj", model.blr.proj))
+        if model.blr.window_proj is not None:
+            pairs.append(("window_proj", model.blr.window_proj))
+    else:
+        pairs.append(("kq", model.attention.kq))
+    try:
+        for prefix, target in pairs:
+            target.load_state_dict({k[len(prefix) + 1:]: v for k, v in state.items() if k.startswith(prefix + ".")})
+        model.normalizer.set_scales(state["feature_scale"], state["label_scale"])
+        out = model.output.net
+        with torch.no_grad():
+            if int(module.attention_heads) == 1 or model.blr is not None:  # undo CchpPolicy's one-matrix first layer
+                first = module.out_first_weight
+                out.weights[0].copy_(first.reshape(first.size(0), MOTION_DIM, -1).permute(1, 0, 2))
+                out.biases[0].copy_(module.out_first_bias.reshape(MOTION_DIM, -1))
+            else:
+                out.weights[0].copy_(module.out_first_weights)
+                out.biases[0].copy_(module.out_first_biases.squeeze(1))
+            for i, (w, b) in enumerate(zip(module.out_weights, module.out_biases)):
+                out.weights[i + 1].copy_(w)
+                out.biases[i + 1].copy_(b.squeeze(1))
+            if model.blr is not None:
+                model.blr.log_lambda.fill_(math.log(float(module.blr_lambda)))
+    except (RuntimeError, KeyError) as err:
+        raise InputError(f"{path}: the options {overrides} do not fit the file's weights "
+                         f"({str(err).splitlines()[0][:160]})") from None
+    return model.eval(), card
+
+
+def export_model(model: Cchp, card: dict, out: os.PathLike) -> pathlib.Path:
+    """Script `model` and write it to `out` with `card` as its model card (atomically)."""
+    scripted = script_policy(model)
     out = pathlib.Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
@@ -373,14 +446,43 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
     return out
 
 
+def parse_overrides(items: Sequence[str]) -> dict:
+    """["KEY=JSON", ...] -> {KEY: value}; a bare word that is not JSON is a string."""
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise InputError(f"--set {item!r}: expected KEY=VALUE")
+        try:
+            out[key] = json.loads(text)
+        except json.JSONDecodeError:
+            out[key] = text
+    return out
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.export", description="Export a CCHP checkpoint as TorchScript.")
-    p.add_argument("--checkpoint", required=True, help="checkpoint written by python -m rtcohand_drake.train")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoint", help="checkpoint written by python -m rtcohand_drake.train")
+    src.add_argument("--from-policy", help="an exported policy file, re-exported with --set options changed")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --from-policy: a model option that holds no parameters, e.g. "
+                        "phi_signed_square_prior=context (repeatable)")
     p.add_argument("--out", required=True, help="TorchScript file to write (.pt)")
     args = p.parse_args(argv)
     # TorchScript is the deployment format of docs/interfaces.md (the exported policy); its deprecation notice is noise here.
     warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-    out = export_checkpoint(args.checkpoint, args.out)
+    if args.checkpoint:
+        if args.set:
+            p.error("--set goes with --from-policy")
+        out = export_checkpoint(args.checkpoint, args.out)
+    else:
+        overrides = parse_overrides(args.set)
+        model, card = cchp_from_policy(args.from_policy, overrides)
+        card = {**card, "model_config": model.cfg.to_dict(),
+                "meta": {**card.get("meta", {}), "derived_from": {"policy": pathlib.Path(args.from_policy).name,
+                                                                   "set": overrides}}}
+        out = export_model(model, card, args.out)
     load_policy(out)
     print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB)")
     return 0

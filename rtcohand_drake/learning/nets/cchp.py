@@ -76,6 +76,12 @@ class CchpConfig:
     # the direction of an asymmetric stroke, such as a finger sweep whose fast stroke carries the
     # sign, which no linear function of the frames shows (their sum over a back-and-forth is ~0).
     phi_signed_square: bool = False
+    # The prior precision on those 36 signed-square features: "fixed", blr_lambda as for the rest
+    # of phi; "context", blr_lambda * phi_signed_square_prior_weight * the feature's mean square over
+    # the context, the same as a ridge on that block standardised by the person's own clips (its
+    # scale varies a hundredfold between people; the learned part of phi has a trained scale).
+    phi_signed_square_prior: str = "fixed"
+    phi_signed_square_prior_weight: float = 1.0
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
@@ -206,6 +212,21 @@ class ContextAttention(nn.Module):
         return torch.matmul(weights, values), weights
 
 
+def blr_prior_precision(phi: torch.Tensor, m: torch.Tensor, lam: torch.Tensor, start: int, stop: int,
+                        weight: float) -> torch.Tensor:
+    """The Bayesian linear read's prior precision (.., d) for phi (.., K, d) with the step mask
+    m (.., K, 1): lam for every feature, and with weight > 0, lam * weight * (mean square over the
+    masked steps) for features start:stop (the signed-square block), so that block is read as if
+    standardised by the context. Adding diag(prior) to Phi^T Phi equals a ridge on phi / s with
+    s^2 = weight * mean square; W and A then stay in phi's own units, so a step is unchanged."""
+    prior = lam * torch.ones_like(phi[..., 0, :])
+    if weight > 0.0 and stop > start:
+        ms = ((phi[..., start:stop] ** 2) * m).sum(-2) / m.sum(-2).clamp_min(1.0)
+        scaled = lam * weight * ms.clamp_min(1e-6)
+        prior = torch.cat([prior[..., :start], scaled, prior[..., stop:]], -1)
+    return prior
+
+
 def signed_square_sum(window: torch.Tensor) -> torch.Tensor:
     """(.., W * 36) frames (oldest first) -> (.., 36): the sum over the W frames of x |x|."""
     frames = window.reshape(window.shape[:-1] + (-1, FEATURE_DIM))
@@ -217,7 +238,7 @@ class BayesLinearRead(nn.Module):
 
     With Phi (K, d) the features of the K context steps and Y (K, 6) their
     labels (label-scale units), the posterior over the map W (d, 6) has
-    precision Phi^T Phi + lambda I, so with A = (Phi^T Phi + lambda I)^-1
+    precision Phi^T Phi + Lambda, so with A = (Phi^T Phi + Lambda)^-1
 
         r(t) = phi(t)^T A Phi^T Y,     v(t) = 1 + phi(t)^T A phi(t).
 
@@ -225,7 +246,9 @@ class BayesLinearRead(nn.Module):
     over the context steps, r = a . Y. v(t) grows when the live gesture is
     unlike every context gesture; the reported std is scaled by sqrt(v).
     A is computed once per context (a batched Cholesky solve, differentiable,
-    so phi is meta-learned through it); a step is then O(d^2).
+    so phi is meta-learned through it); a step is then O(d^2). Lambda is
+    lambda I, except on the signed-square block with phi_signed_square_prior
+    "context" (`blr_prior_precision`).
     """
 
     def __init__(self, cfg: CchpConfig):
@@ -238,6 +261,14 @@ class BayesLinearRead(nn.Module):
         self.dim = (cfg.phi_size + (FEATURE_DIM if cfg.phi_raw else 0) + 1
                     + (cfg.phi_window_size if cfg.phi_window else 0) + (FEATURE_DIM if self.signed_square else 0))
         self.log_lambda = nn.Parameter(torch.tensor(math.log(cfg.blr_lambda)))
+        # The signed-square block sits just before the constant; its prior scales with the context
+        # when phi_signed_square_prior is "context" (weight 0: the fixed prior).
+        if cfg.phi_signed_square_prior not in ("fixed", "context"):
+            raise ValueError(f"phi_signed_square_prior must be 'fixed' or 'context', got {cfg.phi_signed_square_prior!r}")
+        self.ssq_stop = self.dim - 1
+        self.ssq_start = self.ssq_stop - (FEATURE_DIM if self.signed_square else 0)
+        self.ssq_prior_weight = (float(cfg.phi_signed_square_prior_weight)
+                                 if self.signed_square and cfg.phi_signed_square_prior == "context" else 0.0)
 
     @property
     def lam(self) -> torch.Tensor:
@@ -264,7 +295,8 @@ class BayesLinearRead(nn.Module):
         """phi (B, K, d), y (B, K, 6), mask (B, K) -> W (B, d, 6), A (B, d, d)."""
         m = mask.unsqueeze(-1).to(phi.dtype)
         phi = phi * m
-        gram = phi.transpose(1, 2) @ phi + self.lam * torch.eye(self.dim, dtype=phi.dtype, device=phi.device)
+        prior = blr_prior_precision(phi, m, self.lam, self.ssq_start, self.ssq_stop, self.ssq_prior_weight)
+        gram = phi.transpose(1, 2) @ phi + torch.diag_embed(prior)
         chol = torch.linalg.cholesky(gram)
         A = torch.cholesky_inverse(chol)
         W = torch.cholesky_solve(phi.transpose(1, 2) @ (y * m), chol)
