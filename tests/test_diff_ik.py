@@ -8,7 +8,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from pydrake.multibody.inverse_kinematics import DifferentialInverseKinematicsSystem
 
-from rtcohand_drake.systems.diff_ik import FollowStatus, clamp_twist, make_twist_to_joint_velocity
+from rtcohand_drake.systems.diff_ik import FollowStatus, clamp_twist, make_twist_to_joint_velocity, unrequested_scale
 from rtcohand_drake.cell.initial_pose import GEN3_HOME_RAD
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.stations.sim import make_sim_station
@@ -113,6 +113,30 @@ def test_never_exceeds_limits_when_driven_into_them(scenario):
         v_prev = v
     # The angular command was clamped to the Cartesian limit, then to joint limits: it reports so.
     assert any(s[4][0] != FollowStatus.FOLLOWING for s in samples)
+
+
+def test_unrequested_scale_bounds_the_motion_beyond_the_command():
+    turn = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])  # [w; v]: a pure turn asked for
+    assert unrequested_scale(0.7 * turn, turn, 0.03, 0.15) == 1.0  # slower, but only what was asked
+    swung = np.array([0.0, 0.0, 1.0, 0.2, 0.1, 0.0])  # ... and the centre swung aside at 0.22 m/s
+    scale = unrequested_scale(swung, turn, 0.03, 0.15)
+    assert scale == pytest.approx(0.03 / np.hypot(0.2, 0.1))
+    assert np.linalg.norm((scale * swung)[3:]) == pytest.approx(0.03, rel=0.01)
+    tilted = np.array([0.3, 0.0, 1.0, 0.0, 0.0, 0.0])  # a turn about another axis as well
+    assert unrequested_scale(tilted, turn, 0.03, 0.15) == pytest.approx(0.5)
+    assert unrequested_scale(tilted, turn, 0.03, 0.0) == 1.0  # 0: that half unchecked
+    assert unrequested_scale(swung, np.zeros(6), 0.03, 0.15) < 0.15  # nothing asked: all of it is unrequested
+
+
+def test_a_turn_driven_into_the_joint_limits_never_swings_the_part_aside(scenario):
+    """A long fast turn runs the wrist into its limits; the least-squares cost would then trade the
+    turn for a swing of the part's centre. The centre's speed stays within the bound on motion
+    nobody asked for (plus the acceleration-limited come-down of one period)."""
+    ik, samples = _closed_loop(scenario, np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]), 8.0)
+    bound = scenario.diff_ik.max_unrequested_linear_m_s
+    come_down = scenario.diff_ik.joint_acceleration_rad_s2 * scenario.control_period_s * 1.0  # <= 1 m lever
+    speeds = [np.linalg.norm(b[1][:3] - a[1][:3]) / (b[0] - a[0]) for a, b in zip(samples, samples[1:])]
+    assert max(speeds) <= bound + come_down, max(speeds)
 
 
 def test_zero_twist_means_no_motion(scenario, controller):

@@ -25,7 +25,12 @@ about its centre with the commanded angular velocity w (docs/interfaces.md
   never pushed away: its padding in the checker is set to d - margin for the period.
 
 The answer is clipped to the acceleration and speed limits (the QP solver meets
-its bounds to a tolerance; the limits are hard).
+its bounds to a tolerance; the limits are hard). Then, since the least-squares
+cost may trade one component of the twist for another (a turn asked for, the
+part's centre swung aside at speed when a joint limit binds), the command is
+scaled down until the achieved motion beyond the commanded one is within
+`max_unrequested_linear_m_s` and `max_unrequested_angular_rad_s`
+(`unrequested_scale`): a slower command, so every limit above still holds.
 
 Input ports
   twist_command           (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
@@ -92,6 +97,12 @@ class DiffIk:
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
+    # Motion nobody asked for: the part of the achieved twist that is not along the command
+    # (the least-squares cost trades one component for another when a joint limit binds, and
+    # the part's centre can then swing at full speed while only a turn was asked for). The
+    # joint command is scaled down until that part is within these bounds. 0 switches it off.
+    max_unrequested_linear_m_s: float = 0.03
+    max_unrequested_angular_rad_s: float = 0.15
     # Clearance from the cell (table, mold, glass) for the arm, gripper and part: a pair
     # closer than cell_clearance_within_m may shrink at most at (d - margin) / approach time,
     # and not at all inside min_cell_clearance_m. 0 switches it off.
@@ -115,6 +126,25 @@ STUCK_RATIO = 1e-2
 # A collision row counts as binding within this rate of its bound (m/s).
 BINDING_ROW_TOLERANCE_M_S = 1e-3
 ROBOT_MODELS = ("gen3", "gripper", "workpiece")
+
+
+def unrequested_scale(V_achieved: np.ndarray, V_desired: np.ndarray, max_linear: float, max_angular: float) -> float:
+    """The factor (0..1] to scale a joint command by so that the motion it makes beyond the
+    commanded one stays within max_linear (m/s) and max_angular (rad/s).
+
+    Spatial velocities [w; v]. The unrequested part of V_achieved is V_achieved - s V_desired,
+    s = <V_achieved, V_desired> / |V_desired|^2 (all of V_achieved when V_desired is zero); it
+    scales with the command, so one factor brings both of its halves within bounds. A bound of
+    0 leaves that half unchecked."""
+    vv = float(np.dot(V_desired, V_desired))
+    s = float(np.dot(V_achieved, V_desired)) / vv if vv > 1e-18 else 0.0
+    error = V_achieved - s * V_desired
+    scale = 1.0
+    for part, bound in ((error[3:], max_linear), (error[:3], max_angular)):
+        size = float(np.linalg.norm(part))
+        if bound > 0 and size > bound:
+            scale = min(scale, bound / size)
+    return scale
 
 
 def clamp_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -292,6 +322,10 @@ class TwistToJointVelocity(LeafSystem):
             return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
         v_next = np.clip(v_qp, v_current - dv, v_current + dv)
         v_next = np.clip(v_next, -self.joint_velocity_limit, self.joint_velocity_limit)
+        if moving:  # bound the motion beyond the command; a slower command is still within every limit
+            scale = unrequested_scale(J @ v_next, V, cfg.max_unrequested_linear_m_s, cfg.max_unrequested_angular_rad_s)
+            if scale < 1.0:  # (coming down no faster than the acceleration limit allows)
+                v_next = np.clip(scale * v_next, v_current - dv, v_current + dv)
         held = False
         if clearance is not None and clearance.size():
             rates = clearance.jacobians() @ v_next
