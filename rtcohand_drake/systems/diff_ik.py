@@ -8,7 +8,9 @@ workpiece centre with the commanded linear velocity v and turns the workpiece
 about its centre with the commanded angular velocity w (docs/interfaces.md
 (frames and the meaning of a twist); both given in the user frame U):
 
-- `LeastSquaresCost`: |V_desired - J v|², V in the world frame, weight `tracking_weight`;
+- `LeastSquaresCost`: |V_desired - J v|², V in the world frame, weight `tracking_weight`,
+  and a second one on the linear half alone (axis mask [0 0 0 1 1 1]), weight
+  `linear_tracking_weight`, so the part turns about its centre instead of swinging it aside;
 - `JointCenteringCost`: toward the nominal posture (the scenario's `robot.q0_rad`)
   in the null space of J, gain `joint_centering_gain`;
 - `CartesianVelocityLimitConstraint`: each component of the workpiece's angular
@@ -94,6 +96,12 @@ class DiffIk:
     # Weight of the twist-tracking least-squares cost; the joint centering cost has weight 1
     # (Drake advises about 100 between them).
     tracking_weight: float = 100.0
+    # Weight of a second least-squares cost on the linear half of the twist alone (Drake's
+    # LeastSquaresCost with the axis mask [0 0 0 1 1 1]): the first cost alone weighs an error of
+    # 0.1 m/s like one of 0.1 rad/s, so a turn was tracked by swinging the part's centre aside (up
+    # to 0.2 m/s). 100 x tracking_weight weighs 1 cm/s of the centre like 0.1 rad/s of turn (a
+    # length scale of 0.1 m, the part's size). 0: none.
+    linear_tracking_weight: float = 10000.0
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
@@ -101,7 +109,7 @@ class DiffIk:
     # (the least-squares cost trades one component for another when a joint limit binds, and
     # the part's centre can then swing at full speed while only a turn was asked for). The
     # joint command is scaled down until that part is within these bounds. 0 switches it off.
-    max_unrequested_linear_m_s: float = 0.03
+    max_unrequested_linear_m_s: float = 0.05
     max_unrequested_angular_rad_s: float = 0.15
     # Clearance from the cell (table, mold, glass) for the arm, gripper and part: a pair
     # closer than cell_clearance_within_m may shrink at most at (d - margin) / approach time,
@@ -253,6 +261,10 @@ class TwistToJointVelocity(LeafSystem):
         recipe = DiffIkSystem.Recipe()
         recipe.AddIngredient(DiffIkSystem.LeastSquaresCost(
             DiffIkSystem.LeastSquaresCost.Config(cartesian_qp_weight=cfg.tracking_weight)))
+        if cfg.linear_tracking_weight > 0:
+            recipe.AddIngredient(DiffIkSystem.LeastSquaresCost(DiffIkSystem.LeastSquaresCost.Config(
+                cartesian_qp_weight=cfg.linear_tracking_weight,
+                cartesian_axis_masks={self._frame_name: np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])})))
         recipe.AddIngredient(DiffIkSystem.JointCenteringCost(
             DiffIkSystem.JointCenteringCost.Config(posture_gain=cfg.joint_centering_gain)))
         recipe.AddIngredient(DiffIkSystem.CartesianVelocityLimitConstraint(
