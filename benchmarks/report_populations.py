@@ -1,7 +1,7 @@
 """How well a policy reads the out-sample people of generated populations, next to the fitted reference.
 
     python benchmarks/report_populations.py --model PATH.pt --population-seeds 0 2 [--checkpoint CKPT]
-        [--correction-weight W] [--closed-loop] [--out DIR]
+        [--correction-weight W] [--closed-loop [--run-seed 0] [--duration 180]] [--out DIR]
 
 For each population (`data.generate --users 15 --seed N`, written to
 out/population15_sN.h5 when missing) and each of its five out-sample people:
@@ -61,9 +61,10 @@ def reading(model: str, user: str, seed: int, weight: float | None) -> dict:
             "gains": {name: g for name, _, g, _ in rows}}
 
 
-def closed_loop(model: str, seed: int, weight: float | None, intent: bool, out: Path) -> dict:
+def closed_loop(model: str, seed: int, weight: float | None, intent: bool, out: Path, run_seed: int = 0,
+                duration: float = 180.0) -> dict:
     cmd = [sys.executable, str(REPO / "benchmarks" / "bench_inspection.py"), "--population-seed", str(seed),
-           "--seed", "0", "--jobs", "2", "--out", str(out)]
+           "--seed", str(run_seed), "--jobs", "2", "--out", str(out), "--duration", str(duration)]
     cmd += ["--intent"] if intent else ["--model", model]
     if weight is not None and not intent:
         cmd += ["--correction-weight", str(weight)]
@@ -74,7 +75,9 @@ def closed_loop(model: str, seed: int, weight: float | None, intent: bool, out: 
         m = re.search(r"\|\s*6/6\s*\|\s*([0-9.]+) s", row)
         times[user] = float(m.group(1)) if m else None
     done = [t for t in times.values() if t is not None]
-    return {"times": times, "completed": len(done), "median_time": float(np.median(done)) if done else None,
+    safe = re.search(r"users completing the task safely: (\d+)/", text)
+    return {"times": times, "completed": len(done), "completed_safely": int(safe.group(1)) if safe else None,
+            "median_time": float(np.median(done)) if done else None, "run_seed": run_seed, "duration_s": duration,
             "table": text}
 
 
@@ -84,6 +87,8 @@ def main(argv=None) -> int:
     p.add_argument("--population-seeds", type=int, nargs="+", required=True)
     p.add_argument("--correction-weight", type=float, default=None, help="default: the scenario's")
     p.add_argument("--closed-loop", action="store_true")
+    p.add_argument("--run-seed", type=int, default=0, help="the closed-loop runs' --seed (the people's decision rhythm)")
+    p.add_argument("--duration", type=float, default=180.0, help="closed-loop cap (s)")
     p.add_argument("--out", type=Path, default=REPO / "out" / "report")
     args = p.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -91,8 +96,10 @@ def main(argv=None) -> int:
     for seed in args.population_seeds:
         pop = {"people": {u: reading(args.model, u, seed, args.correction_weight) for u in OUT_SAMPLE}}
         if args.closed_loop:
-            pop["policy"] = closed_loop(args.model, seed, args.correction_weight, False, args.out / f"s{seed}_policy")
-            pop["intent"] = closed_loop(args.model, seed, None, True, args.out / f"s{seed}_intent")
+            pop["policy"] = closed_loop(args.model, seed, args.correction_weight, False, args.out / f"s{seed}_policy",
+                                        args.run_seed, args.duration)
+            pop["intent"] = closed_loop(args.model, seed, None, True, args.out / f"s{seed}_intent",
+                                        args.run_seed, args.duration)
         report["populations"][seed] = pop
         print(f"population seed {seed}:")
         print("| person | Own (policy) | Own (ridge) | median gain | weakest motion | ridge median gain |")
@@ -106,7 +113,8 @@ def main(argv=None) -> int:
         if args.closed_loop:
             for kind in ("policy", "intent"):
                 c = pop[kind]
-                print(f"closed loop, {kind}: {c['completed']}/5 complete, median "
+                print(f"closed loop, {kind} (run seed {c['run_seed']}, cap {c['duration_s']:.0f} s): "
+                      f"{c['completed']}/5 complete ({c['completed_safely']}/5 safely), median "
                       f"{c['median_time'] if c['median_time'] is None else round(c['median_time'], 1)} s "
                       f"({', '.join(f'{u} {t}' for u, t in c['times'].items())})")
         sys.stdout.flush()

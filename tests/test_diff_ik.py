@@ -142,12 +142,18 @@ def test_a_turn_driven_into_the_joint_limits_never_swings_the_part_aside(scenari
 @pytest.mark.parametrize("axis", [3, 4, 5])
 def test_a_fast_turn_in_free_space_keeps_the_part_centre_in_place(scenario, axis):
     """The turn is about the part's centre: with the linear half of the twist weighted on its own
-    (`linear_tracking_weight`), the centre moves at most 2 cm/s while the part turns at 0.8 rad/s."""
+    (`linear_tracking_weight`) and the backstop off, the centre moves at most 5 cm/s while the
+    part starts turning at 0.8 rad/s, and at most 3.5 cm/s once it turns (one cost alone: 0.19-0.30)."""
+    import copy
+
+    s = copy.deepcopy(scenario)
+    s.diff_ik.max_unrequested_linear_m_s = s.diff_ik.max_unrequested_angular_rad_s = 0.0
     twist = np.zeros(6)
     twist[axis] = 0.8
-    _, samples = _closed_loop(scenario, twist, 1.0)
-    speeds = [np.linalg.norm(b[1][:3] - a[1][:3]) / (b[0] - a[0]) for a, b in zip(samples, samples[1:])]
-    assert max(speeds) <= 0.02, max(speeds)
+    _, samples = _closed_loop(s, twist, 1.0)
+    speeds = np.array([np.linalg.norm(b[1][:3] - a[1][:3]) / (b[0] - a[0]) for a, b in zip(samples, samples[1:])])
+    assert speeds.max() <= 0.05, speeds.max()
+    assert speeds[-25:].max() <= 0.035, speeds[-25:].max()
 
 
 def test_zero_twist_means_no_motion(scenario, controller):

@@ -99,9 +99,10 @@ class DiffIk:
     # Weight of a second least-squares cost on the linear half of the twist alone (Drake's
     # LeastSquaresCost with the axis mask [0 0 0 1 1 1]): the first cost alone weighs an error of
     # 0.1 m/s like one of 0.1 rad/s, so a turn was tracked by swinging the part's centre aside (up
-    # to 0.2 m/s). 100 x tracking_weight weighs 1 cm/s of the centre like 0.1 rad/s of turn (a
-    # length scale of 0.1 m, the part's size). 0: none.
-    linear_tracking_weight: float = 10000.0
+    # to 0.2 m/s). 24 x tracking_weight weighs 1 cm/s of the centre like 0.05 rad/s of turn. Chosen
+    # on development runs: 10,000 (100 x) left the QP trading the turn away instead (README,
+    # "Differential IK"). 0: none.
+    linear_tracking_weight: float = 2400.0
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
@@ -110,7 +111,7 @@ class DiffIk:
     # the part's centre can then swing at full speed while only a turn was asked for). The
     # joint command is scaled down until that part is within these bounds. 0 switches it off.
     max_unrequested_linear_m_s: float = 0.05
-    max_unrequested_angular_rad_s: float = 0.15
+    max_unrequested_angular_rad_s: float = 0.3
     # Clearance from the cell (table, mold, glass) for the arm, gripper and part: a pair
     # closer than cell_clearance_within_m may shrink at most at (d - margin) / approach time,
     # and not at all inside min_cell_clearance_m. 0 switches it off.
