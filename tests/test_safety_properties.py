@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from rtcohand_drake.diagram import build_run_diagram
+from rtcohand_drake.diagram import build_run_diagram, peak_speeds
 from rtcohand_drake.systems.operator_panel import ScheduledOperatorPanel
 from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.systems.safety.supervisor import plausible_features
@@ -238,3 +238,7 @@ def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed, in_mold
     if in_mold:
         clearance, when = mold_clearance(scenario, t_q, q)
         assert clearance > 0.0, (clearance, when)
+    # 8. The part itself never moves faster than the speed limits (its centre's speed and its turn
+    #    rate, from the logged poses), whatever the arm's joints do to follow the command.
+    v_part, w_part = peak_speeds(t_q, pose)
+    assert v_part <= sa.max_linear_speed_m_s * 1.02 and w_part <= sa.max_angular_speed_rad_s * 1.02, (v_part, w_part)

@@ -32,7 +32,9 @@ cost may trade one component of the twist for another (a turn asked for, the
 part's centre swung aside at speed when a joint limit binds), the command is
 scaled down until the achieved motion beyond the commanded one is within
 `max_unrequested_linear_m_s` and `max_unrequested_angular_rad_s`
-(`unrequested_scale`): a slower command, so every limit above still holds.
+(`unrequested_scale`), and the part's speed (the norm of J v) within
+`max_linear_speed_m_s` and `max_angular_speed_rad_s`: a slower command, so
+every limit above still holds.
 
 Input ports
   twist_command           (6) [vx vy vz wx wy wz], m/s and rad/s, user frame
@@ -335,10 +337,18 @@ class TwistToJointVelocity(LeafSystem):
             return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
         v_next = np.clip(v_qp, v_current - dv, v_current + dv)
         v_next = np.clip(v_next, -self.joint_velocity_limit, self.joint_velocity_limit)
-        if moving:  # bound the motion beyond the command; a slower command is still within every limit
-            scale = unrequested_scale(J @ v_next, V, cfg.max_unrequested_linear_m_s, cfg.max_unrequested_angular_rad_s)
-            if scale < 1.0:  # (coming down no faster than the acceleration limit allows)
-                v_next = np.clip(scale * v_next, v_current - dv, v_current + dv)
+        # Bound the motion beyond the command, and the part's speed itself (the QP's limit is per
+        # component, so its norm could reach sqrt(3) times the limit); a slower command is still
+        # within every other limit. It comes down no faster than the acceleration limit allows.
+        V_next = J @ v_next
+        scale = unrequested_scale(V_next, V, cfg.max_unrequested_linear_m_s,
+                                  cfg.max_unrequested_angular_rad_s) if moving else 1.0
+        for part, limit in ((V_next[3:], cfg.max_linear_speed_m_s), (V_next[:3], cfg.max_angular_speed_rad_s)):
+            speed = float(np.linalg.norm(part))
+            if speed > limit:
+                scale = min(scale, limit / speed)
+        if scale < 1.0:
+            v_next = np.clip(scale * v_next, v_current - dv, v_current + dv)
         held = False
         if clearance is not None and clearance.size():
             rates = clearance.jacobians() @ v_next
