@@ -216,3 +216,36 @@ def test_a_zero_twist_while_moving_brings_the_part_to_rest(scenario, controller)
         assert part_speed(q, v) <= speed + 1e-6
         speed = part_speed(q, v)
     assert np.allclose(v, 0.0, atol=1e-6)
+
+
+def test_console_silencing_from_two_threads_leaves_the_console_open():
+    """Controllers solving in two threads (the intent reference with --jobs 2) each close the console
+    around Drake's solve. Forced into the worst order (B enters while A is inside, A leaves first),
+    the process's standard output must still be the console afterwards: B waits for A."""
+    import os
+    import threading
+
+    from rtcohand_drake.systems.diff_ik import _console_silenced
+
+    before = os.fstat(1)
+    a_inside, b_inside, a_left = threading.Event(), threading.Event(), threading.Event()
+
+    def a():
+        with _console_silenced():
+            a_inside.set()
+            b_inside.wait(0.3)  # without the turn-taking, B is inside by now and saved /dev/null
+        a_left.set()
+
+    def b():
+        a_inside.wait()
+        with _console_silenced():
+            b_inside.set()
+            a_left.wait(0.6)  # ... and restores it after A has restored the console
+
+    threads = [threading.Thread(target=a), threading.Thread(target=b)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    after = os.fstat(1)
+    assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)

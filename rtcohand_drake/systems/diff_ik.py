@@ -64,6 +64,7 @@ import functools
 import math
 import os
 import sys
+import threading
 
 import numpy as np
 from pydrake.common import Parallelism
@@ -184,20 +185,27 @@ def _console_silenced():
     Drake's system solves with OSQP under options of its own, and OSQP prints a line
     ("Polishing not needed ...") at most solves; a failed solve is logged as a
     warning. Both reach the console from C every period; `follow_status` reports
-    the failure instead."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(1), os.dup(2)]
-    try:
-        os.dup2(_devnull(), 1)
-        os.dup2(_devnull(), 2)
-        yield
-    finally:
-        _libc().fflush(None)
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in saved:
-            os.close(fd)
+    the failure instead. The descriptors are the process's, so controllers solving in
+    several threads take turns (`_CONSOLE_LOCK`): otherwise one thread could save the
+    other's /dev/null as "the console" and restore it, and the process would print
+    nothing more."""
+    with _CONSOLE_LOCK:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(_devnull(), 1)
+            os.dup2(_devnull(), 2)
+            yield
+        finally:
+            _libc().fflush(None)
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+
+
+_CONSOLE_LOCK = threading.Lock()
 
 
 @functools.cache
