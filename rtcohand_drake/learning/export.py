@@ -372,14 +372,19 @@ def export_checkpoint(checkpoint: os.PathLike, out: os.PathLike) -> pathlib.Path
     return export_model(model, card, out)
 
 
-def read_model_card(path: os.PathLike) -> dict:
-    """The JSON model card an exported policy carries (`export_checkpoint`)."""
+def policy_and_card(path: os.PathLike) -> Tuple[torch.jit.ScriptModule, dict]:
+    """An exported policy and the JSON model card it carries (`export_checkpoint`)."""
     extra = {"model_card.json": ""}
     load_policy(path)  # a clear error for a missing or wrong file first
-    torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
+    module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
     if not extra["model_card.json"]:
         raise InputError(f"{path}: the policy file has no model card")
-    return json.loads(extra["model_card.json"])
+    return module, json.loads(extra["model_card.json"])
+
+
+def read_model_card(path: os.PathLike) -> dict:
+    """The JSON model card an exported policy carries."""
+    return policy_and_card(path)[1]
 
 
 def cchp_from_policy(path: os.PathLike, overrides: Optional[dict] = None) -> Tuple[Cchp, dict]:
@@ -390,16 +395,15 @@ def cchp_from_policy(path: os.PathLike, overrides: Optional[dict] = None) -> Tup
     The rebuilt model exports to a policy that computes what the file computes (tested)."""
     from rtcohand_drake.learning.checkpoint import build_model
 
-    card = read_model_card(path)
+    module, card = policy_and_card(path)
     if card.get("kind") != "cchp":
         raise InputError(f"{path}: only CCHP policies can be rebuilt, this one is {card.get('kind')!r}")
-    module = torch.jit.load(str(path), map_location="cpu")
     config = {**card["model_config"], **(overrides or {})}
     try:
         model = build_model("cchp", config)
     except (TypeError, ValueError) as err:
         raise InputError(f"{path}: cannot rebuild with {overrides}: {err}") from None
-    state = {k: v for k, v in module.state_dict().items()}
+    state = module.state_dict()
     pairs = [("fingers", model.cell.fingers.net), ("hand", model.cell.hand), ("lstm", model.cell.lstm),
              ("aggregate", model.latent.aggregate), ("trunk", model.latent.trunk), ("mu_head", model.latent.mu_head),
              ("sigma_head", model.latent.sigma_head)]

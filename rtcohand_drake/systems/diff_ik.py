@@ -111,10 +111,11 @@ class DiffIk:
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
     follow_ratio_threshold: float = 0.9
-    # Motion nobody asked for: the part of the achieved twist that is not along the command
-    # (the least-squares cost trades one component for another when a joint limit binds, and
-    # the part's centre can then swing at full speed while only a turn was asked for). The
-    # joint command is scaled down until that part is within these bounds. 0 switches it off.
+    # Motion nobody asked for: in each half of the achieved twist, what is not along that half's
+    # command or goes beyond it (`unrequested_motion`; the least-squares cost trades one component
+    # for another when a joint limit binds, and the part's centre can then swing at full speed
+    # while only a turn was asked for). The joint command is scaled down until it is within these
+    # bounds. 0 switches that half off.
     max_unrequested_linear_m_s: float = 0.05
     max_unrequested_angular_rad_s: float = 0.3
     # The part's speed (the norm of J v) is capped at this fraction of the speed limits: the arm's
@@ -147,22 +148,29 @@ BINDING_ROW_TOLERANCE_M_S = 1e-3
 ROBOT_MODELS = ("gen3", "gripper", "workpiece")
 
 
-def unrequested_scale(V_achieved: np.ndarray, V_desired: np.ndarray, max_linear: float, max_angular: float) -> float:
-    """The factor (0..1] to scale a joint command by so that the motion it makes beyond the
-    commanded one stays within max_linear (m/s) and max_angular (rad/s).
+def unrequested_motion(V_achieved: np.ndarray, V_desired: np.ndarray) -> tuple[float, float]:
+    """The motion beyond the command: (linear m/s, angular rad/s) of spatial velocities [w; v].
 
-    Spatial velocities [w; v]; each half on its own. What a half achieves along its command, up
-    to the command itself, was asked for (any share of it: a turn slowed by a joint limit while
-    the part still translates as asked is fine); the rest of that half (sideways, backwards or
-    beyond the command; all of it when the half's command is zero) was not. That rest scales with
-    the joint command, so one factor brings both halves within bounds. A bound of 0 leaves that
-    half unchecked."""
-    scale = 1.0
-    for half, bound in ((slice(3, 6), max_linear), (slice(0, 3), max_angular)):
+    Each half on its own. What a half achieves along its command, up to the command itself,
+    was asked for (any share of it: a turn slowed by a joint limit while the part still
+    translates as asked is fine); the rest of that half (sideways, backwards or beyond the
+    command; all of it when the half's command is zero) was not."""
+    sizes = []
+    for half in (slice(3, 6), slice(0, 3)):
         achieved, desired = V_achieved[half], V_desired[half]
         dd = float(np.dot(desired, desired))
         share = min(max(float(np.dot(achieved, desired)) / dd, 0.0), 1.0) if dd > 1e-18 else 0.0
-        size = float(np.linalg.norm(achieved - share * desired))
+        sizes.append(float(np.linalg.norm(achieved - share * desired)))
+    return sizes[0], sizes[1]
+
+
+def unrequested_scale(V_achieved: np.ndarray, V_desired: np.ndarray, max_linear: float, max_angular: float) -> float:
+    """The factor (0..1] to scale a joint command by so that the motion it makes beyond the
+    commanded one (`unrequested_motion`) stays within max_linear (m/s) and max_angular (rad/s).
+    That motion scales with the joint command, so one factor brings both halves within bounds.
+    A bound of 0 leaves that half unchecked."""
+    scale = 1.0
+    for size, bound in zip(unrequested_motion(V_achieved, V_desired), (max_linear, max_angular)):
         if bound > 0 and size > bound:
             scale = min(scale, bound / size)
     return scale
@@ -366,12 +374,13 @@ class TwistToJointVelocity(LeafSystem):
                 scale = min(scale, cap / speed)
         if scale < 1.0:
             v_next = np.clip(scale * v_next, v_current - dv, v_current + dv)
+            V_next = J @ v_next
         held = False
         if clearance is not None and clearance.size():
             rates = clearance.jacobians() @ v_next
             bounds = -np.maximum(clearance.distances() - cfg.min_cell_clearance_m, 0.0) / cfg.clearance_approach_time_s
             held = bool(np.any((rates < 0) & (rates <= bounds + BINDING_ROW_TOLERANCE_M_S)))
-        ratio = float(np.dot(J @ v_next, V) / np.dot(V, V)) if moving else 1.0
+        ratio = float(np.dot(V_next, V) / np.dot(V, V)) if moving else 1.0
         if invalid:
             status = FollowStatus.INVALID_INPUT
         elif held:
