@@ -124,7 +124,7 @@ def _build(args, scenario, meshcat, station=None):
         setup = make_gesture_source(args.gesture_source, args, scenario)
         return build_run_diagram(scenario, source=setup.source, meshcat=meshcat, station=station,
                                  gesture_source=args.gesture_source), setup.end_time
-    from rtcohand_drake.data.dataset import context_pieces
+    from rtcohand_drake.data.dataset import context_pieces, missing_motions
     from rtcohand_drake.learning.policy_file import load_policy
     from rtcohand_drake.systems.policy import CchpPolicy
 
@@ -140,6 +140,12 @@ def _build(args, scenario, meshcat, station=None):
     else:
         raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
                          "(the user's own labelled clips)")
+    missing = missing_motions(pieces)
+    if missing:
+        print(f"warning: the context holds no example of {', '.join(missing)}: a gesture for "
+              f"{'that motion' if len(missing) == 1 else 'those motions'} may be read wrongly; record "
+              f"{'it' if len(missing) == 1 else 'them'} (python -m rtcohand_drake.record --only {','.join(missing)})",
+              file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time

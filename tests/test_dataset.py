@@ -217,3 +217,20 @@ def test_meshcat_animation_of_a_clip(clips):
     anim = animate_clip(meshcat, clips[0], prefix="test_clip")
     assert anim.frames_per_second() == clips[0].fps
     assert meshcat.HasPath("test_clip/workpiece") and meshcat.HasPath("test_clip/hand/k20")
+
+
+def test_missing_motions_names_what_a_context_holds_no_example_of():
+    from rtcohand_drake.analysis.context_reading import builtin_clips
+    from rtcohand_drake.data.dataset import missing_motions
+
+    clips = builtin_clips("u10", 10.0)
+    full = [(c.features, c.labels) for c in clips]
+    assert missing_motions(full) == []
+    # Leave out every clip that moves along -x or turns about +z: exactly those two are named.
+    kept = [(c.features, c.labels) for c in clips
+            if not ((c.labels[:, 0] < -0.01).any() or (c.labels[:, 5] > 0.05).any())]
+    assert 0 < len(kept) < len(full)
+    assert missing_motions(kept) == ["Tx-", "Rz+"]
+    # Labels all zero (or not finite): every motion is missing.
+    still = [(np.zeros((20, 36)), np.full((20, 6), np.nan))]
+    assert len(missing_motions(still)) == 12

@@ -383,6 +383,27 @@ def find_clips(clips: Iterable, spec: str) -> list:
     return [c for c in clips if c.user == spec]
 
 
+def missing_motions(pieces, share: float = 0.25, min_steps: int = 3) -> list[str]:
+    """The motions (Tx+ ... Rz-) a context holds no example of.
+
+    A motion counts as present when at least `min_steps` context steps have a label along it
+    (that dimension, that sign) of at least `share` of the largest label of the same half
+    (linear or angular) anywhere in the context. The policy's read has little data behind a
+    missing motion, so a gesture for it can be read large and in any direction.
+    """
+    labels = np.concatenate([np.asarray(y, np.float64).reshape(-1, 6) for _, y in pieces])
+    labels = np.nan_to_num(labels, nan=0.0, posinf=0.0, neginf=0.0)
+    missing = []
+    for half in (slice(0, 3), slice(3, 6)):
+        block = labels[:, half]
+        level = share * float(np.abs(block).max()) if block.size else 0.0
+        for d in range(half.start, half.stop):
+            for sign, mark in ((1.0, "+"), (-1.0, "-")):
+                if level <= 0.0 or int(np.count_nonzero(sign * labels[:, d] >= level)) < min_steps:
+                    missing.append(DIMENSIONS[d] + mark)
+    return missing
+
+
 def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
     """A user's own labelled clips from a dataset file, as (features, labels) pieces, and the user.
 
