@@ -142,9 +142,8 @@ def _build(args, scenario, meshcat, station=None):
                          "(the user's own labelled clips)")
     missing = missing_motions(pieces)
     if missing:
-        print(f"warning: the context holds no example of {', '.join(missing)}: a gesture for "
-              f"{'that motion' if len(missing) == 1 else 'those motions'} may be read wrongly; record "
-              f"{'it' if len(missing) == 1 else 'them'} (python -m rtcohand_drake.record --only {','.join(missing)})",
+        print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
+              f"read wrongly; record them: python -m rtcohand_drake.record --only {','.join(missing)}",
               file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,

@@ -395,8 +395,7 @@ def missing_motions(pieces, share: float = 0.25, min_steps: int = 3) -> list[str
     labels = np.nan_to_num(labels, nan=0.0, posinf=0.0, neginf=0.0)
     missing = []
     for half in (slice(0, 3), slice(3, 6)):
-        block = labels[:, half]
-        level = share * float(np.abs(block).max()) if block.size else 0.0
+        level = share * float(np.abs(labels[:, half]).max())
         for d in range(half.start, half.stop):
             for sign, mark in ((1.0, "+"), (-1.0, "-")):
                 if level <= 0.0 or int(np.count_nonzero(sign * labels[:, d] >= level)) < min_steps:
