@@ -147,6 +147,36 @@ def test_context_prior_export_matches_python_model():
     assert torch.allclose(means, ref, atol=1e-5), (means - ref).abs().max()
 
 
+def test_label_lead_export_matches_python_model_and_reads_later_labels():
+    """With label_lead, the read is solved for each context step's label that many steps on: the
+    export computes what the model does, and its values are the labels shifted within each clip
+    (a clip's last label repeated past its end)."""
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(key_source="gesture", attention_kernel="distance", read_skip=True, read="bayes_linear",
+                            phi_window=10, phi_signed_square=True, phi_signed_square_prior="context",
+                            phi_signed_square_prior_weight=3.0, label_lead=3)).eval()
+    model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
+    rng = np.random.default_rng(6)
+    target = _clip(rng, 45)
+    context = [_clip(rng, 40), _clip(rng, 28), _clip(rng, 13)]
+    ref = model.predict(collate([target], [context]))["mean"][0]
+    policy = script_policy(model)
+    assert policy.label_lead == 3
+    means, _, (_, values, _, _) = _run_policy(policy, target[0], context)
+    assert torch.allclose(means, ref, atol=1e-5), (means - ref).abs().max()
+    expected = np.concatenate([np.concatenate([y[3:], np.repeat(y[-1:], 3, 0)]) for _, y in context])
+    assert np.allclose(values.numpy(), expected)
+    # Without the lead the same weights read the unshifted labels, and the output differs.
+    model.cfg.label_lead = 0
+    plain = model.predict(collate([target], [context]))["mean"][0]
+    assert (plain - ref).abs().max() > 1e-4
+
+
+def test_label_lead_needs_the_bayes_linear_read():
+    with pytest.raises(ValueError, match="label_lead"):
+        Cchp(CchpConfig(label_lead=2))
+
+
 def _card(model):
     return {"kind": "cchp", "model_config": model.cfg.to_dict(), "train_config": {}, "step": 7, "meta": {}}
 

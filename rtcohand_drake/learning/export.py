@@ -45,7 +45,7 @@ from torch import nn
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.nets.blocks import FEATURE_DIM, MOTION_DIM
-from rtcohand_drake.learning.nets.cchp import Cchp, blr_prior_precision
+from rtcohand_drake.learning.nets.cchp import Cchp, blr_prior_precision, lead_labels
 from rtcohand_drake.learning.checkpoint import load_checkpoint
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
@@ -130,6 +130,8 @@ class CchpPolicy(nn.Module):
         self.ssq_start = int(model.blr.ssq_start) if model.blr is not None else 0
         self.ssq_stop = int(model.blr.ssq_stop) if model.blr is not None else 0
         self.ssq_prior_weight = float(model.blr.ssq_prior_weight) if model.blr is not None else 0.0
+        # The read is solved for each context step's label this many steps later (CchpConfig.label_lead).
+        self.label_lead = int(cfg.label_lead)
         if model.blr is not None:
             self.key_size = self.phi_dim  # Phi A's width; D = d + ceil((d^2 + 6 d) / K) in all (pack_blr_keys)
         # The size of `step_read`'s query, from which `attention_of` gives the attention: phi (d) for the
@@ -205,6 +207,9 @@ class CchpPolicy(nn.Module):
             y_prev = y[:, t]
         h_all = torch.stack(hs, 1)[mask]  # (K, H)
         y_valid = y[mask]  # (K, 6), normalised
+        # What the read is solved for: each step's label label_lead steps later (K, 6), m/s and rad/s.
+        values = lead_labels(y_c.to(torch.float32), mask, self.label_lead)[mask]
+        y_read = values / self.label_scale
         if self.bayes_linear:
             if self.has_window_proj:
                 padded = nn.functional.pad(x, [0, 0, self.phi_window - 1, 0])
@@ -217,14 +222,13 @@ class CchpPolicy(nn.Module):
             gram = torch.mm(phi.t(), phi) + torch.diag(prior)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
             phi_a = torch.mm(phi, A)
-            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), y_valid))  # (K, d + ceil((d^2 + 6 d) / K))
+            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), y_read))  # (K, d + ceil((d^2 + 6 d) / K))
         else:
             keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
         g = self.trunk(s)
         z_mu = self.mu_head(g)[0]
         z_sigma = self.latent_std_min + (1.0 - self.latent_std_min) * torch.sigmoid(self.sigma_head(g)[0])
-        values = y_c.to(torch.float32)[mask]
         return keys, values, z_mu, z_sigma
 
     def _softmax_weights(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:

@@ -82,6 +82,11 @@ class CchpConfig:
     # scale varies a hundredfold between people; the learned part of phi has a trained scale).
     phi_signed_square_prior: str = "fixed"
     phi_signed_square_prior_weight: float = 1.0
+    # The read leads the labels by this many steps (0: it reads the label of the same step): the
+    # Bayesian linear read is solved for the label label_lead steps after each context step, and the
+    # decoder is trained on the target's labels shifted alike, so the command comes before the
+    # handler's reaction delay that the labels carry (`lead_labels`; bayes_linear only).
+    label_lead: int = 0
     output_hidden: List[int] = field(default_factory=lambda: [128, 64])  # f_y hidden layers
     std_min: float = 0.1  # lower bound of the predicted std, in label-scale units
     latent_std_min: float = 0.1  # lower bound of sigma_z
@@ -227,6 +232,17 @@ def blr_prior_precision(phi: torch.Tensor, m: torch.Tensor, lam: torch.Tensor, s
     return prior
 
 
+def lead_labels(y: torch.Tensor, mask: torch.Tensor, lead: int) -> torch.Tensor:
+    """y (N, T, 6) with mask (N, T) True on each sequence's real steps (padded at the end) -> each
+    step's label `lead` steps later; a sequence's last real label repeats past its end."""
+    if lead <= 0:
+        return y
+    t_len = y.shape[1]
+    last = (mask.to(torch.long).sum(1, keepdim=True) - 1).clamp_min(0)  # (N, 1)
+    idx = torch.minimum(torch.arange(t_len, device=y.device).unsqueeze(0) + lead, last)  # (N, T)
+    return torch.gather(y, 1, idx.unsqueeze(-1).expand(-1, -1, y.shape[2]))
+
+
 def signed_square_sum(window: torch.Tensor) -> torch.Tensor:
     """(.., W * 36) frames (oldest first) -> (.., 36): the sum over the W frames of x |x|."""
     frames = window.reshape(window.shape[:-1] + (-1, FEATURE_DIM))
@@ -365,6 +381,8 @@ class Cchp(nn.Module):
             raise ValueError(f"read must be 'attention' or 'bayes_linear', got {self.cfg.read!r}")
         if self.cfg.read == "bayes_linear" and (self.cfg.key_source != "gesture" or self.cfg.attention_heads != 1):
             raise ValueError("read 'bayes_linear' needs key_source 'gesture' and one attention head")
+        if self.cfg.label_lead < 0 or (self.cfg.label_lead > 0 and self.cfg.read != "bayes_linear"):
+            raise ValueError("label_lead must be >= 0, and > 0 needs read 'bayes_linear'")
         if self.cfg.phi_signed_square and not (self.cfg.read == "bayes_linear" and self.cfg.phi_window > 0):
             raise ValueError("phi_signed_square needs read 'bayes_linear' and phi_window > 0")
         self.normalizer = Normalizer()
@@ -404,7 +422,7 @@ class Cchp(nn.Module):
             x_c = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
             h_c = self.encode_sequences(x_c, y_c)
         mask = batch.mask_c.reshape(b, p * tc)
-        values = y_c.reshape(b, p * tc, MOTION_DIM)
+        values = lead_labels(y_c, batch.mask_c.reshape(b * p, tc), self.cfg.label_lead).reshape(b, p * tc, MOTION_DIM)
         blr_W = blr_A = None
         if self.blr is not None:
             x_pieces = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
@@ -587,6 +605,9 @@ def cchp_elbo(
     x = batch.x
     if x_noise_std > 0.0:
         x = x + x_noise_std * torch.randn(x.shape, generator=generator, device=x.device)
+    if model.cfg.label_lead > 0:  # the decoder is trained to say what the labels will say label_lead steps on
+        batch = Batch(batch.x, lead_labels(batch.y, batch.mask, model.cfg.label_lead), batch.mask, batch.x_c,
+                      batch.y_c, batch.mask_c)
     y_n = model.normalizer_y(batch.y)
     reads: Optional[List[torch.Tensor]] = [] if readout_weight > 0.0 else None
     mean_n, std_n, _ = model.decode(model.normalizer_x(x), ctx, z, y_teacher=y_n, p_tf=p_tf, generator=generator,
