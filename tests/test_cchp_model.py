@@ -213,3 +213,28 @@ def test_read_skip_adds_the_context_read_to_the_mean():
     mean, _, _ = model.decode(model.normalizer_x(batch.x), ctx, ctx.z_mu, readouts=reads)
     read = torch.stack(reads, 1)[:, :, 0]
     assert torch.allclose(mean, read) and read.abs().max() > 0
+
+
+def test_label_lead_trains_on_the_labels_that_many_steps_on():
+    """With label_lead k the loss scores each step's mean against the label k steps later (a clip's
+    last label repeated past its end), and the read is solved for the context's shifted labels."""
+    from rtcohand_drake.learning.nets.cchp import lead_labels
+
+    torch.manual_seed(0)
+    cfg = dict(SMALL, key_source="gesture", gesture_hidden_size=8, read="bayes_linear", phi_size=8, label_lead=2)
+    model = Cchp(CchpConfig(**cfg))
+    batch = collate(*_batch())
+    terms = model(batch, p_tf=0.0, sample_posterior=False)
+    h_c, h_t = model.encode_context_and_target(batch)
+    ctx, stats = model.encode_context(batch, h_c)
+    z, _ = model.posterior(batch, stats, h_t)
+    mean = model.decode(model.normalizer_x(batch.x), ctx, z)[0] * model.normalizer.label_scale
+    m = batch.mask.float()
+    target = torch.zeros_like(batch.y)
+    for i, n in enumerate(batch.mask.sum(1).tolist()):  # written out: y[min(t + 2, n - 1)]
+        target[i, :n] = batch.y[i, [min(t + 2, n - 1) for t in range(n)]]
+    assert torch.allclose(lead_labels(batch.y, batch.mask, 2) * m.unsqueeze(-1), target)
+    expected = ((((target - mean) ** 2).mean(-1) * m).sum(1) / m.sum(1)).mean()
+    assert torch.allclose(terms["mse"], expected, rtol=1e-5)
+    unshifted = ((((batch.y - mean) ** 2).mean(-1) * m).sum(1) / m.sum(1)).mean()
+    assert not torch.allclose(terms["mse"], unshifted, rtol=1e-3)
