@@ -1,6 +1,7 @@
 """The full diagram with the policy: real-time factor, and gesture-to-command onset latency.
 
     python benchmarks/bench_diagram.py [--repeats 3] [--duration 30] [--clips 12] [--model PATH.pt] [--onset-only]
+        [--plot OUT.png [--compare-model OTHER.pt]]
 
 1. Real-time factor: the built-in simulated person -> shipped CCHP policy ->
    filter -> safety -> diff IK -> simulated Gen3, headless, as fast as possible;
@@ -65,10 +66,11 @@ def _onset(t: np.ndarray, along: np.ndarray, t0: float, level: float | None = No
     return float(t[above[0]] - t0) if len(above) else None
 
 
-def onset_latencies(scenario, model, clips, pieces, mode):
+def onset_latencies(scenario, model, clips, pieces, mode, traces=None):
     """Per clip, after the gesture start (s; None where absent): the label's and the command's onset
     (each above 20 % of its own peak), and the policy output's onset above the command's level
-    (20 % of the command's peak), so that command - policy is the filter's own lag."""
+    (20 % of the command's peak), so that command - policy is the filter's own lag. If `traces` is a
+    list, each clip's signals along its active dimension (with the clip's sign) are appended to it."""
     scenario.command_filter.mode = mode
     scenario.safety.mold_exit_height_m = 0.0  # the corridor off (module docstring)
     rate = scenario.policy.rate_hz
@@ -93,10 +95,52 @@ def onset_latencies(scenario, model, clips, pieces, mode):
         t_label = np.arange(len(clip.labels)) / rate
         along = sign * cmd[:, dim]
         level = 0.2 * along.max() if along.max() > 1e-6 else None
+        if traces is not None:
+            traces.append({"t0": t0, "features": (t_label, strength / strength.max()),
+                           "labels": (t_label, sign * clip.labels[:, dim]), "policy": (tp, sign * mean[:, dim]),
+                           "command": (t, along), "dim": dim})
         onsets.append((_onset(t_label, sign * clip.labels[:, dim], t0),
                        _onset(tp, sign * mean[:, dim], t0, level) if level is not None else None,
                        _onset(t, along, t0)))
     return onsets
+
+
+def plot_traces(path: Path, runs: dict, clips: int = 4) -> None:
+    """The first `clips` clips: features, labels, policy output and command of each run, from the gesture's start."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+    first = next(iter(runs.values()))
+    n = min(clips, len(first))
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), sharey=True, squeeze=False)
+    for i, ax in enumerate(axes[0]):
+        ref = first[i]
+        t0 = ref["t0"]
+        peak = max(ref["labels"][1].max(), 1e-9)
+        tf, f = ref["features"]
+        ax.plot(tf - t0, f, color="0.7", lw=1, label="hand features (share of peak)")
+        tl, yl = ref["labels"]
+        ax.plot(tl - t0, yl / peak, color="k", lw=2, label="labels (handler)")
+        for (name, traces), color in zip(runs.items(), ("tab:blue", "tab:orange", "tab:green", "tab:red")):
+            tc, c = traces[i]["command"]
+            ax.plot(tc - t0, c / peak, color=color, lw=1.5, label=f"command, {name}")
+            if not name.startswith("paper"):  # the same policy output as the responsive run's
+                tp, m = traces[i]["policy"]
+                ax.plot(tp - t0, m / peak, color=color, lw=1, ls=":", label=f"policy output, {name}")
+        ax.axvline(0.0, color="0.5", lw=0.8)
+        ax.axhline(0.2, color="0.5", lw=0.8, ls="--")
+        ax.set_xlim(-0.5, 3.0)
+        ax.set_title(f"clip {i + 1}: {names[ref['dim']]}")
+        ax.set_xlabel("time from the gesture's start (s)")
+    axes[0][0].set_ylabel("along the clip's motion, share of the label's peak")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _median_ms(values) -> str:
@@ -111,6 +155,9 @@ def main():
     p.add_argument("--clips", type=int, default=12)
     p.add_argument("--model", type=Path, default=None, help="a policy file (default: the scenario's)")
     p.add_argument("--onset-only", action="store_true", help="skip the real-time factor")
+    p.add_argument("--plot", type=Path, default=None, help="save the first clips' traces (PNG)")
+    p.add_argument("--compare-model", type=Path, default=None,
+                   help="with --plot: also draw this policy file's responsive command")
     args = p.parse_args()
     scenario = load_scenario("inspection")
     model = args.model if args.model is not None else models_dir() / scenario.policy.model
@@ -129,8 +176,9 @@ def main():
     mine = [c for c in clips if c.user == user]
     singles = [c for c in mine if len(c.active_dims) == 1][: args.clips]
     pieces = [(c.features, c.labels) for c in mine if c not in singles]
-    paper = onset_latencies(scenario, model, singles, pieces, "paper")
-    responsive = onset_latencies(scenario, model, singles, pieces, "responsive")
+    traces = {"paper": [], "responsive": []}
+    paper = onset_latencies(scenario, model, singles, pieces, "paper", traces["paper"])
+    responsive = onset_latencies(scenario, model, singles, pieces, "responsive", traces["responsive"])
     commands = {name: [o[2] for o in onsets] for name, onsets in (("paper", paper), ("responsive", responsive))}
     mp = statistics.median([v for v in commands["paper"] if v is not None])
     mr = statistics.median([v for v in commands["responsive"] if v is not None])
@@ -143,6 +191,15 @@ def main():
         print(f"  command, {name} mode: {_median_ms(commands[name])}; the filter's own lag "
               f"(command onset - policy onset, per clip): {_median_ms(lag)}")
     print(f"  ratio of command onsets, paper / responsive: {mp / mr:.1f}x")
+    if args.plot is not None:
+        runs = {"responsive": traces["responsive"], "paper": traces["paper"]}
+        if args.compare_model is not None:
+            other: list = []
+            compared = onset_latencies(scenario, args.compare_model, singles, pieces, "responsive", other)
+            runs[f"responsive, {args.compare_model.name}"] = other
+            print(f"  command, responsive mode, {args.compare_model}: {_median_ms([o[2] for o in compared])}")
+        plot_traces(args.plot, runs)
+        print(f"wrote {args.plot}")
 
 if __name__ == "__main__":
     main()
