@@ -1,0 +1,86 @@
+"""How much of a wild read (a context without the gesture's motion) does the safety layer's confidence scaling take out?
+
+    python benchmarks/probe_wild_read.py [--data out/population15_s0.h5] [--model models/cchp_default.pt]
+        [--settings D+U+ D-U+ D-U- Unseen Own] [--max-episodes 120]
+
+For the first episodes of each evaluation setting, the exported policy is
+stepped over the target clip (its own mean fed back, z the mean of q(z|C)),
+and each step's mean and read variance factor v = 1 + phi^T A phi are kept.
+Per setting it prints the squared error as a share of commanding zero twist:
+of the policy's mean, and of the mean scaled by the supervisor's confidence
+scale of v (`systems.safety.rules.confidence_scale` with the scenario's
+keys), and the share of steps the scaling slows (v above its full-speed
+level), with v's median and 90th percentile. Analysis only: the supervisor's
+other limits (speed, workspace, corridor) come after the scaling.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rtcohand_drake.data.dataset import load_policy_clips
+from rtcohand_drake.data.sampling import evaluation_episodes
+from rtcohand_drake.learning.batching import collate_context
+from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.systems.safety.rules import confidence_scale
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_episode(policy, episode):
+    x_c, y_c, mask = collate_context(episode.context)
+    keys, values, z_mu, _ = policy.encode_context(x_c, y_c, mask)
+    x = episode.target_features if episode.target_features is not None else episode.target.features
+    h = torch.zeros(policy.hidden_size)
+    c = torch.zeros(policy.hidden_size)
+    y = torch.zeros(6)
+    means, vs = [], []
+    with torch.no_grad():
+        for t in range(len(x)):
+            mean, _, h, c, _, v, _ = policy.step_read(torch.from_numpy(np.asarray(x[t], np.float32)), y, h, c,
+                                                       keys, values, z_mu)
+            means.append(mean.numpy())
+            vs.append(float(v[0]))
+            y = mean
+    return np.array(means), np.array(vs)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", type=Path, default=REPO / "out" / "population15_s0.h5")
+    p.add_argument("--model", type=Path, default=REPO / "models" / "cchp_default.pt")
+    p.add_argument("--settings", nargs="+", default=["D+U+", "D-U+", "D-U-", "Unseen", "Own"])
+    p.add_argument("--max-episodes", type=int, default=120)
+    args = p.parse_args()
+    safety = load_scenario("inspection").safety
+    policy = load_policy(args.model)
+    clips = load_policy_clips(args.data)
+    print(f"policy {args.model}; confidence scale: 1 up to v = {safety.confidence_full_variance}, "
+          f"{safety.confidence_floor} from v = {safety.confidence_floor_variance}")
+    print("| setting | episodes | mean, share of zero twist | scaled by confidence, share of zero twist "
+          "| steps slowed | v median / 90th percentile |")
+    print("|---|---|---|---|---|---|")
+    for setting in args.settings:
+        episodes = evaluation_episodes(clips, setting, seed=0)[: args.max_episodes]
+        err = err_scaled = zero = 0.0
+        all_v = []
+        for ep in episodes:
+            means, vs = run_episode(policy, ep)
+            scale = np.array([confidence_scale(v, safety) for v in vs])[:, None]
+            y = ep.target.labels
+            err += float(((means - y) ** 2).sum())
+            err_scaled += float(((means * scale - y) ** 2).sum())
+            zero += float((y ** 2).sum())
+            all_v.append(vs)
+        v = np.concatenate(all_v)
+        print(f"| {setting} | {len(episodes)} | {err / zero:.2f} | {err_scaled / zero:.2f} | "
+              f"{np.mean(v > safety.confidence_full_variance):.0%} | {np.median(v):.2f} / {np.quantile(v, 0.9):.2f} |")
+
+
+if __name__ == "__main__":
+    main()
