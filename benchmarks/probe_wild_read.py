@@ -2,6 +2,7 @@
 
     python benchmarks/probe_wild_read.py [--data out/population15_s0.h5] [--model models/cchp_default.pt]
         [--settings D+U+ D-U+ D-U- Unseen Own] [--max-episodes 120]
+        [--confidence-floor F] [--confidence-floor-variance V]   (other values than the scenario's, to compare)
 
 For the first episodes of each evaluation setting, the exported policy is
 stepped over the target clip (its own mean fed back, z the mean of q(z|C)),
@@ -56,8 +57,14 @@ def main() -> None:
     p.add_argument("--model", type=Path, default=REPO / "models" / "cchp_default.pt")
     p.add_argument("--settings", nargs="+", default=["D+U+", "D-U+", "D-U-", "Unseen", "Own"])
     p.add_argument("--max-episodes", type=int, default=120)
+    p.add_argument("--confidence-floor", type=float, default=None, help="default: the scenario's")
+    p.add_argument("--confidence-floor-variance", type=float, default=None, help="default: the scenario's")
     args = p.parse_args()
     safety = load_scenario("inspection").safety
+    if args.confidence_floor is not None:
+        safety.confidence_floor = args.confidence_floor
+    if args.confidence_floor_variance is not None:
+        safety.confidence_floor_variance = args.confidence_floor_variance
     policy = load_policy(args.model)
     clips = load_policy_clips(args.data)
     print(f"policy {args.model}; confidence scale: 1 up to v = {safety.confidence_full_variance}, "
