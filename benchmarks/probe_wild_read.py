@@ -5,7 +5,7 @@
         [--confidence-floor F] [--confidence-floor-variance V]   (other values than the scenario's, to compare)
 
 For the first episodes of each evaluation setting, the exported policy is
-stepped over the target clip (its own mean fed back, z the mean of q(z|C)),
+played over the target clip (`context_reading.play_clip`: its own mean fed back, z the mean of q(z|C)),
 and each step's mean and read variance factor v = 1 + phi^T A phi are kept.
 Per setting it prints the squared error as a share of commanding zero twist:
 of the policy's mean, and of the mean scaled by the supervisor's confidence
@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rtcohand_drake.analysis.context_reading import play_clip
 from rtcohand_drake.data.dataset import load_policy_clips
 from rtcohand_drake.data.sampling import evaluation_episodes
 from rtcohand_drake.learning.batching import collate_context
@@ -34,21 +35,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def run_episode(policy, episode):
+    """The policy's mean over the episode's target (the module's own mean fed back) and each step's v."""
     x_c, y_c, mask = collate_context(episode.context)
-    keys, values, z_mu, _ = policy.encode_context(x_c, y_c, mask)
-    x = episode.target_features if episode.target_features is not None else episode.target.features
-    h = torch.zeros(policy.hidden_size)
-    c = torch.zeros(policy.hidden_size)
-    y = torch.zeros(6)
-    means, vs = [], []
     with torch.no_grad():
-        for t in range(len(x)):
-            mean, _, h, c, _, v, _ = policy.step_read(torch.from_numpy(np.asarray(x[t], np.float32)), y, h, c,
-                                                       keys, values, z_mu)
-            means.append(mean.numpy())
-            vs.append(float(v[0]))
-            y = mean
-    return np.array(means), np.array(vs)
+        keys, values, z_mu, _ = policy.encode_context(x_c, y_c, mask)
+    x = episode.target_features if episode.target_features is not None else episode.target.features
+    vs: list = []
+    means = play_clip(policy, x, keys, values, z_mu, correction_weight=1.0, variances=vs)
+    return means, np.array(vs)
 
 
 def main() -> None:

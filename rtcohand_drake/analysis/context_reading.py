@@ -66,10 +66,12 @@ def verdict(gain: float) -> str:
     return "reads" if gain >= READS else "weak" if gain >= WEAK else "poor"
 
 
-def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: float = 1.0) -> np.ndarray:
+def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: float = 1.0,
+              variances: list | None = None) -> np.ndarray:
     """The policy's output twists (T, 6) over one clip from a zero state, the module's own mean fed back.
 
     The output is r + w (mean - r), r the context read, as `policy_system.CchpPolicy` gives it.
+    If `variances` is a list, each step's read variance factor v (`step_with_variance`) is appended.
     """
     import torch
 
@@ -82,7 +84,11 @@ def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: 
     out = np.zeros((len(features), 6))
     with torch.no_grad():
         for t in range(len(features)):
-            y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
+            if variances is None:
+                y, _, h, c, attention = module.step(x[t], y, h, c, keys, values, z)
+            else:
+                y, _, h, c, attention, v = module.step_with_variance(x[t], y, h, c, keys, values, z)
+                variances.append(float(v[0]))
             out[t] = blended_output(y.numpy(), np.atleast_2d(attention.numpy()) @ values_np, correction_weight)
     return out
 

@@ -209,7 +209,6 @@ class CchpPolicy(nn.Module):
         y_valid = y[mask]  # (K, 6), normalised
         # What the read is solved for: each step's label label_lead steps later (K, 6), m/s and rad/s.
         values = lead_labels(y_c.to(torch.float32), mask, self.label_lead)[mask]
-        y_read = values / self.label_scale
         if self.bayes_linear:
             if self.has_window_proj:
                 padded = nn.functional.pad(x, [0, 0, self.phi_window - 1, 0])
@@ -222,7 +221,7 @@ class CchpPolicy(nn.Module):
             gram = torch.mm(phi.t(), phi) + torch.diag(prior)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
             phi_a = torch.mm(phi, A)
-            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), y_read))  # (K, d + ceil((d^2 + 6 d) / K))
+            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), values / self.label_scale))  # (K, d + ceil((d^2 + 6 d) / K))
         else:
             keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
