@@ -1,7 +1,7 @@
 """The full diagram with the policy: real-time factor, and gesture-to-command onset latency.
 
     python benchmarks/bench_diagram.py [--repeats 3] [--duration 30] [--clips 12] [--model PATH.pt] [--onset-only]
-        [--plot OUT.png [--compare-model OTHER.pt]]
+        [--plot OUT.png [--compare-model OTHER.pt]] [--scenario S] [--read-lead K] [--responsive-window N]
 
 1. Real-time factor: the built-in simulated person -> shipped CCHP policy ->
    filter -> safety -> diff IK -> simulated Gen3, headless, as fast as possible;
@@ -19,6 +19,11 @@
    The mold exit corridor is switched off for this measurement: the part
    starts seated in the mold, where the corridor passes nothing but a lift,
    so with it on only lifting clips would give a command at all.
+
+`--read-lead K` loads the policy file with its `label_lead` set to K (the
+read solved for each context label K steps on; the decoder as trained), and
+`--responsive-window N` sets the responsive filter's window: probes of what
+a file and the filter can give, not settings of the shipped scenario.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
 from rtcohand_drake.cell.robot_files import models_dir
 from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+from rtcohand_drake.learning.policy_file import load_policy
 from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.scenario import load_scenario
 
@@ -158,10 +164,20 @@ def main():
     p.add_argument("--plot", type=Path, default=None, help="save the first clips' traces (PNG)")
     p.add_argument("--compare-model", type=Path, default=None,
                    help="with --plot: also draw this policy file's responsive command")
+    p.add_argument("--scenario", default="inspection", help="built-in scenario name or YAML path")
+    p.add_argument("--read-lead", type=int, default=None, help="override the file's label_lead (a probe)")
+    p.add_argument("--responsive-window", type=int, default=None, help="the responsive filter's window (a probe)")
     args = p.parse_args()
-    scenario = load_scenario("inspection")
+    scenario = load_scenario(args.scenario)
     model = args.model if args.model is not None else models_dir() / scenario.policy.model
     print(f"policy: {model}")
+    if args.responsive_window is not None:
+        scenario.command_filter.responsive_window = args.responsive_window
+        print(f"responsive window: {args.responsive_window}")
+    if args.read_lead is not None:
+        model = load_policy(model)
+        model.label_lead = args.read_lead
+        print(f"read's lead: {args.read_lead} steps")
 
     if not args.onset_only:
         factors = real_time_factor(scenario, model, args.duration, args.repeats)

@@ -70,7 +70,7 @@ class Scenario:
 
 # Fixed lengths of list fields, checked on load.
 _LENGTHS = {"xyz": 3, "rpy_deg": 3, "min_xyz": 3, "max_xyz": 3,
-            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6, "clamp": 6, "mold_exit_half_xy_m": 2}
+            "q0_rad": 7, "kp_nm_per_rad": 7, "kd_nm_s_per_rad": 7, "twist": 6, "clamp": 6, "deadband": 6, "mold_exit_half_xy_m": 2}
 
 
 def builtin_scenarios() -> list[str]:
@@ -155,6 +155,8 @@ def _check_values(s: Scenario, source: str) -> None:
     need(f.window >= 1 and f.responsive_window >= 1, "command_filter windows must be >= 1")
     need(f.command_period_s > 0, "command_filter.command_period_s must be > 0")
     need(all(c > 0 for c in f.clamp), "command_filter.clamp entries must be > 0")
+    need(all(math.isfinite(d) and 0 <= 2 * d < c for d, c in zip(f.deadband, f.clamp)),
+         "command_filter.deadband entries must be >= 0 and less than half the clamp's")
     need(f.max_linear_accel_m_s2 > 0 and f.max_angular_accel_rad_s2 > 0,
          "command_filter acceleration limits must be > 0")
     sa = s.safety

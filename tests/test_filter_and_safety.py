@@ -63,6 +63,39 @@ def test_non_finite_predictions_count_as_zero():
     assert np.all(np.isfinite(out)) and np.allclose(out, 0)
 
 
+def test_deadband_zeroes_small_axes_passes_large_ones_and_is_continuous():
+    from rtcohand_drake.systems.moving_average_downsampler import apply_deadband
+
+    d = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1])
+    x = np.array([0.008, -0.015, 0.05, -0.1, 0.15, 0.5])
+    # 0 within d; x (|x| - d) / d between d and 2 d; x beyond 2 d.
+    assert np.allclose(apply_deadband(x, d), [0.0, -0.0075, 0.05, 0.0, 0.075, 0.5])
+    grid = np.linspace(-0.5, 0.5, 20001)
+    y = apply_deadband(np.repeat(grid[:, None], 6, axis=1), d)
+    assert np.max(np.abs(np.diff(y[:, 3]))) < 3 * (grid[1] - grid[0])  # no jump at d or 2 d
+    assert np.array_equal(apply_deadband(x, np.zeros(6)), x)
+    # In the filter (both modes): a rest drift commands nothing, a gesture's twist passes.
+    for mode in ("paper", "responsive"):
+        drift = _filter_run(CommandFilter(mode=mode, deadband=list(d)), [[0.005, 0, 0, 0.04, -0.05, 0.03]] * 12)
+        assert np.allclose(drift, 0.0)
+        stroke = _filter_run(CommandFilter(mode=mode, deadband=list(d)), [[0.1, 0, 0, 0, 0, 0.5]] * 12)
+        assert np.allclose(stroke[-1], [0.1, 0, 0, 0, 0, 0.5])
+
+
+def test_a_deadband_of_half_the_clamp_or_more_is_refused(tmp_path):
+    from rtcohand_drake.scenario import ScenarioError, load_scenario, resolve_scenario_path
+
+    import re
+
+    text = re.sub(r"\n  deadband: \[[^\]]*\]", "\n  deadband: [0.1, 0, 0, 0, 0, 0]",
+                  resolve_scenario_path("inspection").read_text())
+    assert "deadband: [0.1, 0, 0, 0, 0, 0]" in text
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match="deadband"):
+        load_scenario(path)
+
+
 def _supervisor(config=None, command_period=0.5, box=BOX):
     config = config or Safety()
     s = SafetySupervisor(config, box, R_WU, EYE, command_period)

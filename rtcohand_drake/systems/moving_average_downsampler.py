@@ -10,6 +10,13 @@ Two modes, chosen in the scenario's `command_filter`:
   `responsive_window` (3) predictions, clamped per axis, and changing no
   faster than the linear/angular acceleration limits (a jerk-free ramp).
 
+In both modes the mean passes a per-axis deadband before the clamp: with
+d = `deadband[i]`, an axis whose mean x has |x| <= d commands zero, one with
+|x| >= 2 d commands x unchanged, and in between x (|x| - d) / d, continuous
+in x. A policy's small output while the hand rests, and its small cross-talk
+onto axes the person is not using, then leave the part still; a gesture's
+command (tenths of m/s and rad/s) passes as it is. All zeros: no deadband.
+
 Input ports
   policy_mean   (6) predicted twist [vx vy vz wx wy wz], user frame; sampled at
                 the policy rate, just after each policy update. Non-finite
@@ -45,6 +52,18 @@ class CommandFilter:
     # Responsive mode's limit on how fast the command may change (m/s^2, rad/s^2).
     max_linear_accel_m_s2: float = 0.5
     max_angular_accel_rad_s2: float = 3.0
+    # Per-axis deadband d [vx vy vz wx wy wz] (m/s, rad/s) on the mean: zero within d, unchanged
+    # beyond 2 d, continuous in between (module docstring). Zeros: none.
+    deadband: list[float] = dc.field(default_factory=lambda: [0.0] * 6)
+
+def apply_deadband(x: np.ndarray, deadband: np.ndarray) -> np.ndarray:
+    """Per axis: 0 where |x| <= d, x where |x| >= 2 d, x (|x| - d) / d between (continuous); d = 0 passes x."""
+    x = np.asarray(x, float)
+    d = np.asarray(deadband, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(d > 0, np.clip((np.abs(x) - d) / np.where(d > 0, d, 1.0), 0.0, 1.0), 1.0)
+    return x * share
+
 
 # Sample the policy's output this long after its update, so the newest prediction is seen.
 SAMPLE_DELAY_S = 1e-3
@@ -56,6 +75,7 @@ class MovingAverageDownsampler(LeafSystem):
         self._cfg = config
         self._dt = policy_period_s
         self._clamp = np.asarray(config.clamp, float)
+        self._deadband = np.asarray(config.deadband, float)
         self._n = config.window if config.mode == "paper" else config.responsive_window
         self._in = self.DeclareVectorInputPort(POLICY_MEAN, 6)
         self._resume = self.DeclareVectorInputPort(RESUME_COUNT, 1)
@@ -73,9 +93,11 @@ class MovingAverageDownsampler(LeafSystem):
         return self._cfg.mode
 
     def _mean(self, history: np.ndarray, count: int) -> np.ndarray:
+        """The mean of the held predictions, through the deadband and the clamp."""
         if count == 0:
             return np.zeros(6)
-        return history.reshape(self._n, 6)[: min(count, self._n)].mean(axis=0)
+        mean = history.reshape(self._n, 6)[: min(count, self._n)].mean(axis=0)
+        return np.clip(apply_deadband(mean, self._deadband), -self._clamp, self._clamp)
 
     def _sample(self, context, discrete_state):
         history = context.get_discrete_state(self._history).get_value().copy()
@@ -92,7 +114,7 @@ class MovingAverageDownsampler(LeafSystem):
         head = (head + 1) % self._n
         count = min(count + 1, self._n)
         if self._cfg.mode == "responsive":
-            target = np.clip(self._mean(history, int(count)), -self._clamp, self._clamp)
+            target = self._mean(history, int(count))
             step = np.array([self._cfg.max_linear_accel_m_s2] * 3 + [self._cfg.max_angular_accel_rad_s2] * 3) * self._dt
             command = command + np.clip(target - command, -step, step)
         discrete_state.set_value(self._history, history)
@@ -102,4 +124,4 @@ class MovingAverageDownsampler(LeafSystem):
     def _emit(self, context, discrete_state):
         history = context.get_discrete_state(self._history).get_value()
         count = int(context.get_discrete_state(self._meta).get_value()[0])
-        discrete_state.set_value(self._command, np.clip(self._mean(history, count), -self._clamp, self._clamp))
+        discrete_state.set_value(self._command, self._mean(history, count))

@@ -1,0 +1,89 @@
+"""The policy's read in the closed-loop task: lag and gain against what each simulated person means.
+
+    python benchmarks/closed_loop_read.py --population-seeds 0 2 3 [--scenario S] [--model PATH.pt] [--run-seed 0]
+        [--users u10 .. u14] [--correction-weight W] [--intent] [--out DIR]
+
+For each out-sample person of each population, the inspection runs in closed
+loop as `python -m rtcohand_drake.run --user U --population-seed N` does,
+until the hold after the sixth face (cap: the scenario's), and the policy's
+output is compared with the person's intended twist every policy period
+(`rtcohand_drake.analysis.closed_loop_read`): the lag that best aligns them,
+each used axis's gain at that lag (1 = the person's own speed), the output
+while the person intends nothing, the supervisor's command once the person
+has intended nothing for 1 s (the part should be still), and the completion
+time. `--intent` puts
+the intent reference (the intended twist 0.3 s late) in the policy's place:
+its rows read 300 ms and gains of 1, the calibration of the measure.
+
+Writes DIR/closed_loop_read.md and .json. Choose settings on development
+populations (seeds 0-99).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses as dc
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rtcohand_drake.analysis.closed_loop_read import AXES, markdown, measure
+from rtcohand_drake.scenario import load_scenario
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--population-seeds", type=int, nargs="+", required=True)
+    p.add_argument("--scenario", default="inspection", help="built-in scenario name or YAML path")
+    p.add_argument("--model", type=Path, default=None, help="a policy file (default: the scenario's)")
+    p.add_argument("--run-seed", type=int, default=0, help="the runs' --seed (the people's decision rhythm)")
+    p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
+    p.add_argument("--correction-weight", type=float, default=None, help="default: the scenario's")
+    p.add_argument("--intent", action="store_true", help="the intent reference in the policy's place")
+    p.add_argument("--out", type=Path, default=REPO / "out" / "closed_loop_read")
+    args = p.parse_args(argv)
+    scenario = load_scenario(args.scenario)
+    if args.model is not None:
+        scenario.policy.model = str(args.model.resolve())
+    if args.correction_weight is not None:
+        scenario.policy.correction_weight = args.correction_weight
+    rows = []
+    for population in args.population_seeds:
+        for user in args.users:
+            policy = None
+            if args.intent:
+                from rtcohand_drake.analysis.reference_policies import IntentPolicy
+
+                policy = IntentPolicy(scenario.policy.rate_hz, 0.3)
+            rows.append(measure(scenario, user, population, args.run_seed, policy=policy))
+            r = rows[-1]
+            print(f"p{population}/{user}: completion {r.completion_s}, lag {r.lag_s * 1e3:.0f} ms, gains "
+                  + " ".join(f"{a} {g:+.2f}" for a, g in zip(AXES, r.gains) if np.isfinite(g)), flush=True)
+    table = markdown(rows)
+    used = np.array([r.gains for r in rows])
+    lags = [r.lag_s for r in rows]
+    done = [r.completion_s for r in rows if r.completion_s is not None]
+    summary = (f"\n{'intent reference' if args.intent else f'policy {scenario.policy.model}'}, run seed "
+               f"{args.run_seed}: {len(done)}/{len(rows)} complete, median completion "
+               f"{np.median(done) if done else float('nan'):.1f} s; median lag {np.median(lags) * 1e3:.0f} ms; "
+               "median gain per axis " + ", ".join(
+                   f"{a} {np.nanmedian(used[:, d]):+.2f}" if np.isfinite(used[:, d]).any() else f"{a} -"
+                   for d, a in enumerate(AXES))
+               + f"; still command: median {np.nanmedian([r.still_w_rad_s for r in rows]):.3f} rad/s, "
+               f"{np.nanmedian([r.still_v_m_s for r in rows]) * 1e3:.1f} mm/s, moving in "
+               f"{np.nanmedian([r.still_moving_share for r in rows]):.0%} of the still samples\n")
+    print(table + summary)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "closed_loop_read.md").write_text(table + summary)
+    (args.out / "closed_loop_read.json").write_text(json.dumps(
+        {"model": scenario.policy.model, "intent": args.intent, "run_seed": args.run_seed,
+         "rows": [dc.asdict(r) for r in rows]}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
