@@ -4,7 +4,10 @@
 
 Each cell: MSE mean ± std over seeds, and its share of commanding zero twist.
 The zero-twist and ridge rows come from the first file; the files must agree
-on the data, the episode seed and the episodes per setting.
+on the episode seed and the episodes per setting, and on the data: the same
+path, or, for a dataset file at another path (regenerated with the same
+command), the same zero-twist and ridge MSE in every setting they share,
+which only the same episodes give.
 """
 
 import json
@@ -14,12 +17,25 @@ import sys
 from rtcohand_drake.data.sampling import ALL_SETTINGS
 
 
+def _same_references(a: dict, b: dict) -> bool:
+    """Whether two results have the same zero-twist and ridge MSE in every setting both hold."""
+    for key in ("zero_twist_mse", "ridge_mse"):
+        ra, rb = a["reference"].get(key, {}), b["reference"].get(key, {})
+        shared = set(ra) & set(rb)
+        if not shared or any(abs(ra[s] - rb[s]) > 1e-12 * max(1.0, abs(ra[s])) for s in shared):
+            return False
+    return True
+
+
 def merged_table(results: list[dict]) -> str:
     first = results[0]
     for other in results[1:]:
-        for key in ("data", "seed", "episodes"):
+        for key in ("seed", "episodes"):
             if other[key] != first[key]:
                 raise SystemExit(f"merge_results: the files differ in {key!r}: {first[key]} against {other[key]}")
+        if other["data"] != first["data"] and not _same_references(first, other):
+            raise SystemExit(f"merge_results: the files differ in 'data': {first['data']} against {other['data']}, "
+                             "and their zero-twist or ridge MSE differ")
     zero = first["reference"]["zero_twist_mse"]
     ridge = first["reference"]["ridge_mse"]
     settings = [s for s in ALL_SETTINGS if s in zero]
