@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from rtcohand_drake.analysis.closed_loop_read import AXES, markdown, measure
+from rtcohand_drake.analysis.reference_policies import IntentPolicy
 from rtcohand_drake.scenario import load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,11 +55,7 @@ def main(argv=None) -> int:
     rows = []
     for population in args.population_seeds:
         for user in args.users:
-            policy = None
-            if args.intent:
-                from rtcohand_drake.analysis.reference_policies import IntentPolicy
-
-                policy = IntentPolicy(scenario.policy.rate_hz, 0.3)
+            policy = IntentPolicy(scenario.policy.rate_hz, 0.3) if args.intent else None
             rows.append(measure(scenario, user, population, args.run_seed, policy=policy))
             r = rows[-1]
             print(f"p{population}/{user}: completion {r.completion_s}, lag {r.lag_s * 1e3:.0f} ms, gains "
