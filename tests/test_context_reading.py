@@ -91,6 +91,16 @@ def test_cli_prints_a_row_per_motion(tmp_path, capsys):
     rows = [line for line in out.splitlines() if line.startswith("| ") and line[2:4] in cr.MOTION_NAMES]
     assert len(rows) == 12
     assert "median reading gain" in out
+    poor = [line.split("|")[1].strip() for line in rows if "| poor |" in line]
+    assert poor  # an untrained policy reads some motions poorly, and is told what to do about them
+    assert ("poorly read: " + ", ".join(poor) + ". ") in out and "Record a different gesture" in out
+
+
+def test_cli_gives_no_advice_when_every_motion_reads(capsys):
+    # The shipped policy reads every motion of the benchmark population's u10 (weakest: 0.76).
+    status = run_cli(cr.main, ["--user", "u10"])
+    out = capsys.readouterr().out
+    assert status == 0 and "| poor |" not in out and "poorly read" not in out
 
 
 @pytest.mark.parametrize("argv, expected", [

@@ -37,6 +37,11 @@ from rtcohand_drake.errors import InputError, run_cli
 
 MOTION_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 READS, WEAK = 0.5, 0.2  # verdict thresholds on the reading gain
+# What a person can do about a motion the policy cannot read from their clips. Finger sweeps of a
+# curled hand are the gestures no read of the hand data tells apart (docs/results/sweep/).
+POOR_ADVICE = ("poorly read: {motions}. The arm will barely follow these gestures. Record a different "
+               "gesture for them: a move or turn of the whole hand, or a sweep with the fingers "
+               "extended (a spread or thumb sweep of a curled hand does not show its direction)")
 ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
 
 
@@ -264,6 +269,9 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"(ridge fitted to the person's other clips: {reference_error:.3f})")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
+    poor = [name for name, _, gain, _ in rows if gain < WEAK]
+    if poor:
+        print(POOR_ADVICE.format(motions=", ".join(poor)))
     return 0
 
 
