@@ -68,9 +68,11 @@ def _prior(model, Phi):
     return prior
 
 
-@pytest.mark.parametrize("options", [{}, SIGNED_SQUARE_IN_CONTEXT], ids=["fixed prior", "signed square, context prior"])
+@pytest.mark.parametrize("options", [{}, SIGNED_SQUARE_IN_CONTEXT, {**SIGNED_SQUARE_IN_CONTEXT, "phi_signed_square_clamp": True}],
+                         ids=["fixed prior", "signed square, context prior", "signed square, clamped"])
 def test_read_is_the_closed_form_posterior_mean(options):
-    """r(t) = phi(t)^T (Phi^T Phi + Lambda)^-1 Phi^T Y, solved here in float64 numpy."""
+    """r(t) = phi(t)^T (Phi^T Phi + Lambda)^-1 Phi^T Y, solved here in float64 numpy; with the clamp,
+    phi(t)'s signed-square block first clamped to its range over the context steps."""
     model = _model(**options)
     rng = np.random.default_rng(0)
     context = [_clip(rng, 40), _clip(rng, 31), _clip(rng, 17)]
@@ -83,13 +85,21 @@ def test_read_is_the_closed_form_posterior_mean(options):
     Y = values.double().numpy() / model.normalizer.label_scale.double().numpy()
     gram = Phi.T @ Phi + np.diag(_prior(model, Phi))
     A = np.linalg.inv(gram)
-    assert keys.shape == (len(Phi), d + -(-(d * d + 6 * d) // len(Phi)))
+    clamped = options.get("phi_signed_square_clamp", False)
+    bounds = 72 if clamped else 0  # the signed-square block's lows and highs, after W
+    assert keys.shape == (len(Phi), d + -(-(d * d + 6 * d + bounds) // len(Phi)))
     phi_a, a_packed, w_packed = unpack_blr_keys(keys, d)
     np.testing.assert_allclose(phi_a.double().numpy(), Phi @ A, atol=1e-5)
     np.testing.assert_allclose(a_packed.double().numpy(), A, atol=1e-6)
     W = np.linalg.solve(gram, Phi.T @ Y)
     np.testing.assert_allclose(w_packed.double().numpy(), W, atol=1e-5 * max(1.0, np.abs(W).max()))
     phi_t = _phis(model, target, [m for m, _, _ in steps])
+    if clamped:
+        block = slice(d - 1 - 36, d - 1)
+        lo, hi = Phi[:, block].min(0), Phi[:, block].max(0)
+        inside = np.clip(phi_t[:, block], lo, hi)
+        assert np.abs(inside - phi_t[:, block]).max() > 1e-3  # the target does leave the context's range
+        phi_t[:, block] = inside
     r_numpy = phi_t @ W
     r_policy = np.stack([(att.double() @ values.double()).numpy() for _, _, att in steps])
     r_policy = r_policy / model.normalizer.label_scale.double().numpy()
@@ -232,3 +242,8 @@ def test_context_prior_reads_the_signed_square_whatever_its_scale():
 def test_unknown_signed_square_prior_is_refused():
     with pytest.raises(ValueError, match="phi_signed_square_prior"):
         _model(phi_signed_square=True, phi_signed_square_prior="learned")
+
+
+def test_signed_square_clamp_needs_the_block():
+    with pytest.raises(ValueError, match="phi_signed_square_clamp"):
+        _model(phi_signed_square_clamp=True)

@@ -238,3 +238,21 @@ def test_label_lead_trains_on_the_labels_that_many_steps_on():
     assert torch.allclose(terms["mse"], expected, rtol=1e-5)
     unshifted = ((((batch.y - mean) ** 2).mean(-1) * m).sum(1) / m.sum(1)).mean()
     assert not torch.allclose(terms["mse"], unshifted, rtol=1e-3)
+
+
+def test_checkpoint_loads_with_a_read_option_changed_and_refuses_a_shape_change(tmp_path):
+    """`evaluate --set`: an option that holds no parameters changes how the loaded model reads its
+    context; one that changes a weight's shape is a one-line CheckpointError."""
+    options = dict(key_source="gesture", attention_kernel="distance", read_skip=True, read="bayes_linear",
+                   phi_window=4, phi_signed_square=True, phi_signed_square_prior="context")
+    model = Cchp(CchpConfig(**SMALL, **options))
+    path = tmp_path / "ck.pt"
+    save_checkpoint(path, model, {"model": "cchp"}, step=1)
+    plain, _ = load_checkpoint(path)
+    clamped, _ = load_checkpoint(path, {"phi_signed_square_clamp": True})
+    assert not plain.blr.clamp and clamped.blr.clamp
+    for a, b in zip(plain.state_dict().values(), clamped.state_dict().values()):
+        assert torch.equal(a, b)
+    with pytest.raises(CheckpointError) as err:
+        load_checkpoint(path, {"phi_window": 6})
+    assert str(path) in str(err.value) and "\n" not in str(err.value)

@@ -132,12 +132,14 @@ def test_export_cli_and_bad_files(tmp_path):
         load_policy(truncated)
 
 
-def test_context_prior_export_matches_python_model():
-    """The signed-square block with its prior scaled by the context: the export computes what the model does."""
+@pytest.mark.parametrize("clamp", [False, True], ids=["unclamped", "clamped to the context's range"])
+def test_context_prior_export_matches_python_model(clamp):
+    """The signed-square block with its prior scaled by the context (and clamped to the context's
+    range): the export computes what the model does."""
     torch.manual_seed(0)
     model = Cchp(CchpConfig(key_source="gesture", attention_kernel="distance", read_skip=True, read="bayes_linear",
                             phi_window=10, phi_signed_square=True, phi_signed_square_prior="context",
-                            phi_signed_square_prior_weight=3.0)).eval()
+                            phi_signed_square_prior_weight=3.0, phi_signed_square_clamp=clamp)).eval()
     model.normalizer.set_scales(torch.rand(36) * 0.5 + 0.1, torch.rand(6) * 0.2 + 0.05)
     rng = np.random.default_rng(5)
     target = _clip(rng, 45)

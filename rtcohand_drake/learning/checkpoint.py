@@ -93,11 +93,12 @@ def read_checkpoint(path: os.PathLike) -> Dict[str, Any]:
     return payload
 
 
-def load_checkpoint(path: os.PathLike) -> Tuple[nn.Module, Dict[str, Any]]:
-    """The model (in eval mode) and the checkpoint dictionary."""
+def load_checkpoint(path: os.PathLike, overrides: Optional[Dict[str, Any]] = None) -> Tuple[nn.Module, Dict[str, Any]]:
+    """The model (in eval mode) and the checkpoint dictionary. `overrides` changes model options that
+    hold no parameters (how the context is read); one that changes a weight's shape is refused."""
     payload = read_checkpoint(path)
     try:
-        model = build_model(payload["kind"], payload["model_config"])
+        model = build_model(payload["kind"], {**payload["model_config"], **(overrides or {})})
         model.load_state_dict(payload["state_dict"])
     except (InputError, TypeError, RuntimeError, ValueError) as err:
         raise CheckpointError(f"{path}: checkpoint does not match its model ({str(err).splitlines()[0]})") from None

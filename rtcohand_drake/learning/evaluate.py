@@ -319,7 +319,8 @@ def plot_attention(model, episode, path: pathlib.Path) -> None:
 
 def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Sequence[str]] = None, seed: int = 0,
              settings: Sequence[str] = SETTINGS, sweep: bool = False, spectrum: bool = False,
-             attention: bool = False, threads: int = 0, max_episodes: int = 0) -> Dict:
+             attention: bool = False, threads: int = 0, max_episodes: int = 0,
+             overrides: Optional[Dict] = None) -> Dict:
     from rtcohand_drake.data.sampling import evaluation_episodes
     from rtcohand_drake.learning.train import load_clips
 
@@ -327,7 +328,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         torch.set_num_threads(threads)
     loaded = []
     for i, ck in enumerate(checkpoints):
-        model, payload = load_checkpoint(ck)
+        model, payload = load_checkpoint(ck, overrides)
         name = names[i] if names else model_name(payload)
         loaded.append((name, ck, model, payload))
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
@@ -345,7 +346,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         print(f"evaluated {name} ({ck}): " + ", ".join(
             f"{s} mse={run[s]['mse']:.4g}" if run[s]["mse"] is not None else f"{s} n/a" for s in settings),
             file=sys.stderr)
-    results: Dict = {"data": str(data), "seed": seed, "settings": list(settings),
+    results: Dict = {"data": str(data), "seed": seed, "settings": list(settings), "set": dict(overrides or {}),
                      "episodes": {s: len(episodes[s]) for s in settings}, "models": {},
                      # A policy that always commands zero twist: the floor any useful model must beat.
                      "reference": {"zero_twist_mse": {s: zero_twist_mse(episodes[s]) for s in settings},
@@ -427,6 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--attention", action="store_true", help="attention heatmap of the first CCHP checkpoint")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch default)")
     p.add_argument("--max-episodes", type=int, default=0, help="use at most this many episodes per setting (0: all)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a model option that holds no parameters, for every checkpoint, e.g. "
+                        "phi_signed_square_clamp=true (repeatable)")
     return p
 
 
@@ -434,9 +438,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     if args.names and len(args.names) != len(args.checkpoint):
         raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
+    from rtcohand_drake.learning.export import parse_overrides
+
     results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,
                        args.noise_sweep, args.spectrum, args.attention, args.threads,
-                       args.max_episodes)
+                       args.max_episodes, parse_overrides(args.set))
     print(markdown_report(results))
     return 0
 

@@ -50,19 +50,32 @@ from rtcohand_drake.learning.checkpoint import load_checkpoint
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
 
-def pack_blr_keys(phi_a: torch.Tensor, a: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-    """The Bayesian linear read's keys: one (K, d + ceil((d^2 + 6 d) / K)) block whose memory holds
+def pack_blr_keys(phi_a: torch.Tensor, a: torch.Tensor, w: torch.Tensor,
+                  bounds: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """The Bayesian linear read's keys: one (K, d + ceil((d^2 + 6 d + b) / K)) block whose memory holds
     Phi A (K, d) row-major, then A (d, d), then the read's weights W = A Phi^T Y (d, 6, normalised
-    labels), then zeros. Phi A stays contiguous, so a step that returns the attention reads it in
-    one pass over K x d floats; `step_read` needs only A and W."""
+    labels), then the b `bounds` if given (the signed-square block's range over the context, lows
+    then highs, with `phi_signed_square_clamp`), then zeros. Phi A stays contiguous, so a step that
+    returns the attention reads it in one pass over K x d floats; `step_read` needs only A and W."""
     k, d = phi_a.shape
-    tail = d * d + d * 6  # A, then W (d, 6 motion dimensions)
+    extra = 0 if bounds is None else bounds.numel()
+    tail = d * d + d * 6 + extra  # A, then W (d, 6 motion dimensions), then the bounds
     cols = d + (tail + k - 1) // k
     flat = torch.zeros(k * cols, dtype=phi_a.dtype)
     flat[: k * d] = phi_a.reshape(-1)
     flat[k * d : k * d + d * d] = a.reshape(-1)
-    flat[k * d + d * d : k * d + tail] = w.reshape(-1)
+    flat[k * d + d * d : k * d + d * d + d * 6] = w.reshape(-1)
+    if bounds is not None:
+        flat[k * d + d * d + d * 6 : k * d + tail] = bounds.reshape(-1)
     return flat.view(k, cols)
+
+
+def unpack_blr_bounds(keys: torch.Tensor, d: int, n: int) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(lows (1, n), highs (1, n)): the bounds `pack_blr_keys` wrote after W (views, no copy)."""
+    k = keys.size(0)
+    start = k * d + d * d + d * 6
+    flat = keys.reshape(-1)
+    return flat[start : start + n].view(1, n), flat[start + n : start + 2 * n].view(1, n)
 
 
 def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -130,6 +143,9 @@ class CchpPolicy(nn.Module):
         self.ssq_start = int(model.blr.ssq_start) if model.blr is not None else 0
         self.ssq_stop = int(model.blr.ssq_stop) if model.blr is not None else 0
         self.ssq_prior_weight = float(model.blr.ssq_prior_weight) if model.blr is not None else 0.0
+        # With phi_signed_square_clamp, a step's signed-square block is clamped to the context's range,
+        # which encode_context packs into the keys after W (`pack_blr_keys`).
+        self.ssq_clamp = bool(model.blr.clamp) if model.blr is not None else False
         # The read is solved for each context step's label this many steps later (CchpConfig.label_lead).
         self.label_lead = int(cfg.label_lead)
         if model.blr is not None:
@@ -221,7 +237,12 @@ class CchpPolicy(nn.Module):
             gram = torch.mm(phi.t(), phi) + torch.diag(prior)
             A = torch.cholesky_inverse(torch.linalg.cholesky(gram))
             phi_a = torch.mm(phi, A)
-            keys = pack_blr_keys(phi_a, A, torch.mm(phi_a.t(), values / self.label_scale))  # (K, d + ceil((d^2 + 6 d) / K))
+            w = torch.mm(phi_a.t(), values / self.label_scale)
+            if self.ssq_clamp:
+                block = phi[:, self.ssq_start:self.ssq_stop]
+                keys = pack_blr_keys(phi_a, A, w, torch.cat([block.min(0)[0], block.max(0)[0]]))
+            else:
+                keys = pack_blr_keys(phi_a, A, w)  # (K, d + ceil((d^2 + 6 d) / K))
         else:
             keys = self.kq(h_all[:, self.key_offset:]) * self.key_scale  # (K, heads * key_size)
         s = self.aggregate(torch.cat([h_all, y_valid], 1)).mean(0, keepdim=True)
@@ -307,6 +328,10 @@ class CchpPolicy(nn.Module):
             window = torch.cat([h_in[:, self.state_size:], x.view(1, -1)], 1)  # the last frames, oldest first
         if self.bayes_linear:
             query = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # phi (1, d)
+            if self.ssq_clamp:
+                lo, hi = unpack_blr_bounds(keys, self.phi_dim, self.ssq_stop - self.ssq_start)
+                block = torch.max(torch.min(query[:, self.ssq_start:self.ssq_stop], hi), lo)
+                query = torch.cat([query[:, :self.ssq_start], block, query[:, self.ssq_stop:]], 1)
             _, A, read_w = unpack_blr_keys(keys, self.phi_dim)
             variance_factor = 1.0 + torch.clamp((torch.mm(query, A) * query).sum(), min=0.0).view(1)
             if with_attention:

@@ -82,6 +82,11 @@ class CchpConfig:
     # scale varies a hundredfold between people; the learned part of phi has a trained scale).
     phi_signed_square_prior: str = "fixed"
     phi_signed_square_prior_weight: float = 1.0
+    # Clamp each signed-square feature of a live step to the range the context's steps show (no
+    # parameters; `BayesLinearRead.clamp_block`). The block's weights for a motion the context lacks
+    # rest on almost no data, so a live gesture that excites those features beyond anything in the
+    # context reads wild; clamped, it reads no more than the context's own largest stroke.
+    phi_signed_square_clamp: bool = False
     # The read leads the labels by this many steps (0: it reads the label of the same step): the
     # Bayesian linear read is solved for the label label_lead steps after each context step, and the
     # decoder is trained on the target's labels shifted alike, so the command comes before the
@@ -285,6 +290,7 @@ class BayesLinearRead(nn.Module):
         self.ssq_start = self.ssq_stop - (FEATURE_DIM if self.signed_square else 0)
         self.ssq_prior_weight = (float(cfg.phi_signed_square_prior_weight)
                                  if self.signed_square and cfg.phi_signed_square_prior == "context" else 0.0)
+        self.clamp = bool(cfg.phi_signed_square_clamp) and self.signed_square
 
     @property
     def lam(self) -> torch.Tensor:
@@ -317,6 +323,21 @@ class BayesLinearRead(nn.Module):
         A = torch.cholesky_inverse(chol)
         W = torch.cholesky_solve(phi.transpose(1, 2) @ (y * m), chol)
         return W, A
+
+    def block_bounds(self, phi: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """phi (B, K, d), mask (B, K) -> the signed-square block's smallest and largest value over the
+        masked context steps, (B, n) each."""
+        block = phi[..., self.ssq_start:self.ssq_stop]
+        m = mask.unsqueeze(-1)
+        big = torch.finfo(phi.dtype).max
+        lo = torch.where(m, block, torch.full_like(block, big)).amin(1)
+        hi = torch.where(m, block, torch.full_like(block, -big)).amax(1)
+        return lo, hi
+
+    def clamp_block(self, phi_t: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+        """phi_t (B, d) with its signed-square block clamped to [lo, hi] (B, n)."""
+        block = torch.maximum(torch.minimum(phi_t[:, self.ssq_start:self.ssq_stop], hi), lo)
+        return torch.cat([phi_t[:, :self.ssq_start], block, phi_t[:, self.ssq_stop:]], -1)
 
     def read(self, phi_t: torch.Tensor, W: torch.Tensor, A: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         """phi_t (B, d) -> r (B, 6) and v (B,) = 1 + phi^T A phi."""
@@ -360,6 +381,8 @@ class ContextEncoding:
     # The Bayesian linear read ("bayes_linear"): W (B, d, 6) and A (B, d, d); keys then hold Phi (B, 1, K, d).
     blr_W: Optional[torch.Tensor] = None
     blr_A: Optional[torch.Tensor] = None
+    blr_lo: Optional[torch.Tensor] = None  # (B, n) the signed-square block's range over the context
+    blr_hi: Optional[torch.Tensor] = None  # (phi_signed_square_clamp only)
 
 
 class Cchp(nn.Module):
@@ -385,6 +408,8 @@ class Cchp(nn.Module):
             raise ValueError("label_lead must be >= 0, and > 0 needs read 'bayes_linear'")
         if self.cfg.phi_signed_square and not (self.cfg.read == "bayes_linear" and self.cfg.phi_window > 0):
             raise ValueError("phi_signed_square needs read 'bayes_linear' and phi_window > 0")
+        if self.cfg.phi_signed_square_clamp and not self.cfg.phi_signed_square:
+            raise ValueError("phi_signed_square_clamp needs phi_signed_square")
         self.normalizer = Normalizer()
         self.cell = EncoderCell(self.cfg)
         self.latent = LatentEncoder(self.cfg)
@@ -423,7 +448,7 @@ class Cchp(nn.Module):
             h_c = self.encode_sequences(x_c, y_c)
         mask = batch.mask_c.reshape(b, p * tc)
         values = lead_labels(y_c, batch.mask_c.reshape(b * p, tc), self.cfg.label_lead).reshape(b, p * tc, MOTION_DIM)
-        blr_W = blr_A = None
+        blr_W = blr_A = blr_lo = blr_hi = None
         if self.blr is not None:
             x_pieces = self.normalizer_x(batch.x_c).reshape(b * p, tc, FEATURE_DIM)
             win = self.blr.windows(x_pieces)  # per piece: each piece starts from zeros
@@ -431,6 +456,8 @@ class Cchp(nn.Module):
             phi = self.blr.features(h_c.reshape(b, p * tc, -1)[..., self.cfg.hidden_size:], x_n,
                                     None if win is None else win.reshape(b, p * tc, -1))
             blr_W, blr_A = self.blr.fit(phi, values, mask)
+            if self.blr.clamp:
+                blr_lo, blr_hi = self.blr.block_bounds(phi, mask)
             keys = phi.unsqueeze(1)
         else:
             keys = self.attention.project_keys(h_c.reshape(b, p * tc, -1))
@@ -439,7 +466,8 @@ class Cchp(nn.Module):
         sums = (feats * m).sum(1)
         counts = m.sum(1)
         z_mu, z_sigma = self.latent.from_summary(sums / counts.clamp_min(1.0))
-        return ContextEncoding(keys, values, mask, z_mu, z_sigma, blr_W, blr_A), torch.cat([sums, counts], -1)
+        return (ContextEncoding(keys, values, mask, z_mu, z_sigma, blr_W, blr_A, blr_lo, blr_hi),
+                torch.cat([sums, counts], -1))
 
     def encode_context_and_target(self, batch: Batch) -> Tuple[torch.Tensor, torch.Tensor]:
         """Hidden states of the context pieces (B*P, Tc, H) and of the targets
@@ -501,6 +529,8 @@ class Cchp(nn.Module):
             h, c = self.cell(fingers[:, t], y_prev, h, c)
             if self.blr is not None:
                 phi_t = self.blr.features(h[:, self.cfg.hidden_size:], x[:, t], None if win is None else win[:, t])
+                if ctx.blr_lo is not None:
+                    phi_t = self.blr.clamp_block(phi_t, ctx.blr_lo, ctx.blr_hi)
                 r, v = self.blr.read(phi_t, ctx.blr_W, ctx.blr_A)
                 r = r.unsqueeze(1)  # (B, 1, 6): one read
                 if keep_attention:  # the equivalent kernel a = phi^T A Phi^T, masked
