@@ -149,7 +149,7 @@ class CchpPolicy(nn.Module):
         # The read is solved for each context step's label this many steps later (CchpConfig.label_lead).
         self.label_lead = int(cfg.label_lead)
         if model.blr is not None:
-            self.key_size = self.phi_dim  # Phi A's width; D = d + ceil((d^2 + 6 d) / K) in all (pack_blr_keys)
+            self.key_size = self.phi_dim  # Phi A's width; D = d + ceil((d^2 + 6 d [+ 72 with the clamp]) / K) in all (pack_blr_keys)
         # The size of `step_read`'s query, from which `attention_of` gives the attention: phi (d) for the
         # Bayesian linear read, the attention query (heads * key_size) otherwise.
         self.query_size = self.phi_dim if self.bayes_linear else cfg.attention_heads * cfg.key_size
