@@ -13,7 +13,7 @@ import os
 import pathlib
 import pickle
 import zipfile
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import torch
 from torch import nn
@@ -91,6 +91,21 @@ def read_checkpoint(path: os.PathLike) -> Dict[str, Any]:
         if key not in payload:
             raise CheckpointError(f"{path}: checkpoint lacks {key!r}")
     return payload
+
+
+def parse_overrides(items: Sequence[str]) -> dict:
+    """`--set` options, ["KEY=JSON", ...] -> {KEY: value} (a bare word that is not JSON is a string),
+    for `load_checkpoint`'s and `export --from-policy`'s overrides."""
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise InputError(f"--set {item!r}: expected KEY=VALUE")
+        try:
+            out[key] = json.loads(text)
+        except json.JSONDecodeError:
+            out[key] = text
+    return out
 
 
 def load_checkpoint(path: os.PathLike, overrides: Optional[Dict[str, Any]] = None) -> Tuple[nn.Module, Dict[str, Any]]:

@@ -42,7 +42,7 @@ import torch
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.batching import collate
 from rtcohand_drake.data.sampling import ALL_SETTINGS, SETTINGS
-from rtcohand_drake.learning.checkpoint import load_checkpoint
+from rtcohand_drake.learning.checkpoint import load_checkpoint, parse_overrides
 
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
 MAX_SIGMA_T = 0.05  # m/s
@@ -438,8 +438,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     if args.names and len(args.names) != len(args.checkpoint):
         raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
-    from rtcohand_drake.learning.export import parse_overrides
-
     results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,
                        args.noise_sweep, args.spectrum, args.attention, args.threads,
                        args.max_episodes, parse_overrides(args.set))

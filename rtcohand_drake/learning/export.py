@@ -45,8 +45,8 @@ from torch import nn
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.nets.blocks import FEATURE_DIM, MOTION_DIM
-from rtcohand_drake.learning.nets.cchp import Cchp, blr_prior_precision, lead_labels
-from rtcohand_drake.learning.checkpoint import load_checkpoint
+from rtcohand_drake.learning.nets.cchp import Cchp, blr_prior_precision, clamp_columns, lead_labels
+from rtcohand_drake.learning.checkpoint import load_checkpoint, parse_overrides
 from rtcohand_drake.learning.policy_file import load_policy  # noqa: F401  (also the export check below)
 
 
@@ -330,8 +330,7 @@ class CchpPolicy(nn.Module):
             query = self._phi(h2[:, self.cell_size:self.state_size], x.view(1, -1), window)  # phi (1, d)
             if self.ssq_clamp:
                 lo, hi = unpack_blr_bounds(keys, self.phi_dim, self.ssq_stop - self.ssq_start)
-                block = torch.max(torch.min(query[:, self.ssq_start:self.ssq_stop], hi), lo)
-                query = torch.cat([query[:, :self.ssq_start], block, query[:, self.ssq_stop:]], 1)
+                query = clamp_columns(query, lo, hi, self.ssq_start, self.ssq_stop)
             _, A, read_w = unpack_blr_keys(keys, self.phi_dim)
             variance_factor = 1.0 + torch.clamp((torch.mm(query, A) * query).sum(), min=0.0).view(1)
             if with_attention:
@@ -475,20 +474,6 @@ def export_model(model: Cchp, card: dict, out: os.PathLike) -> pathlib.Path:
     tmp = out.with_name(out.name + ".tmp")
     torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
     os.replace(tmp, out)
-    return out
-
-
-def parse_overrides(items: Sequence[str]) -> dict:
-    """["KEY=JSON", ...] -> {KEY: value}; a bare word that is not JSON is a string."""
-    out = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key:
-            raise InputError(f"--set {item!r}: expected KEY=VALUE")
-        try:
-            out[key] = json.loads(text)
-        except json.JSONDecodeError:
-            out[key] = text
     return out
 
 

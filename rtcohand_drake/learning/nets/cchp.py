@@ -248,6 +248,13 @@ def lead_labels(y: torch.Tensor, mask: torch.Tensor, lead: int) -> torch.Tensor:
     return torch.gather(y, 1, idx.unsqueeze(-1).expand(-1, -1, y.shape[2]))
 
 
+def clamp_columns(phi: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, start: int, stop: int) -> torch.Tensor:
+    """phi (B, d) with columns start:stop clamped to [lo, hi] (B or 1, stop - start); the Python
+    model's and the export's signed-square clamp (`phi_signed_square_clamp`)."""
+    block = torch.maximum(torch.minimum(phi[:, start:stop], hi), lo)
+    return torch.cat([phi[:, :start], block, phi[:, stop:]], 1)
+
+
 def signed_square_sum(window: torch.Tensor) -> torch.Tensor:
     """(.., W * 36) frames (oldest first) -> (.., 36): the sum over the W frames of x |x|."""
     frames = window.reshape(window.shape[:-1] + (-1, FEATURE_DIM))
@@ -336,8 +343,7 @@ class BayesLinearRead(nn.Module):
 
     def clamp_block(self, phi_t: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
         """phi_t (B, d) with its signed-square block clamped to [lo, hi] (B, n)."""
-        block = torch.maximum(torch.minimum(phi_t[:, self.ssq_start:self.ssq_stop], hi), lo)
-        return torch.cat([phi_t[:, :self.ssq_start], block, phi_t[:, self.ssq_stop:]], -1)
+        return clamp_columns(phi_t, lo, hi, self.ssq_start, self.ssq_stop)
 
     def read(self, phi_t: torch.Tensor, W: torch.Tensor, A: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         """phi_t (B, d) -> r (B, 6) and v (B,) = 1 + phi^T A phi."""
