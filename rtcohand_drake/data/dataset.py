@@ -106,10 +106,12 @@ class PolicyClip:
 # --------------------------------------------------------------------------- writing
 
 
-def write_dataset(path: str | os.PathLike, clips: Iterable[Clip], generator: str | None = None) -> None:
+def write_dataset(path: str | os.PathLike, clips: Iterable[Clip], generator: str | None = None,
+                  root_attrs: dict[str, str] | None = None, user_attrs: dict[str, dict[str, str]] | None = None) -> None:
     """Write clips to ``path`` atomically (a temporary file in the same folder, then a rename).
 
-    ``generator`` (optional) is stored as the root attribute ``generator``.
+    ``generator`` (optional) is stored as the root attribute ``generator``; ``root_attrs`` and
+    ``user_attrs`` (user -> attributes) add more text attributes (readers ignore them).
     """
     import h5py
 
@@ -123,12 +125,16 @@ def write_dataset(path: str | os.PathLike, clips: Iterable[Clip], generator: str
             f.attrs["version"] = VERSION
             if generator is not None:
                 f.attrs["generator"] = generator
+            for key, value in (root_attrs or {}).items():
+                f.attrs[key] = value
             users = f.create_group("users")
             for clip in clips:
                 _check_clip_for_writing(path, clip)
                 if clip.user not in users:
                     g = users.create_group(clip.user)
                     g.attrs["group"] = clip.group
+                    for key, value in (user_attrs or {}).get(clip.user, {}).items():
+                        g.attrs[key] = value
                     g.create_group("clips")
                 ug = users[clip.user]
                 if ug.attrs["group"] != clip.group:

@@ -50,12 +50,16 @@ clips from ``D_train``:
   target's linear-velocity entries and sigma_R = 0.025 rad/s on its
   angular-velocity entries; the context stays clean.
 
-One more setting is not in the paper and not in the default six:
+Two more settings are not in the paper and not in the default six:
 
 - ``Own``: the deployed setting. Target from D_test,out; the context is every
   other labelled clip of the target's user (all whole clips; for an
   out-sample user, the rest of their 72), no random clips. This is what the
   run CLI gives the policy for the built-in simulated person.
+- ``Person``: the protocol for recorded people (`rtcohand_drake.data.import_shrec17`).
+  Target: every labelled clip with split "test", of any user and group; the
+  context is every labelled clip of the same user with split "train" (whole
+  clips, no random clips). A user with no train clip gives no episode.
 
 In every paper setting the two random clips are drawn uniformly from the D_train
 clips other than the chosen one (any user). A target with no clip matching
@@ -80,7 +84,8 @@ SETTINGS = ("D+U+", "D+U-", "D-U+", "D-U-", "Unseen", "Noisy")
 NOISY_SIGMA_T = 0.05  # m/s, on linear-velocity entries
 NOISY_SIGMA_R = 0.025  # rad/s, on angular-velocity entries
 OWN_SETTING = "Own"  # the deployed setting (module docstring); not one of the paper's six
-ALL_SETTINGS = SETTINGS + (OWN_SETTING,)
+PERSON_SETTING = "Person"  # recorded people: each user's held-out clips read with their own train clips
+ALL_SETTINGS = SETTINGS + (OWN_SETTING, PERSON_SETTING)
 EVAL_RANDOM_CLIPS = 2
 
 Piece = tuple[np.ndarray, np.ndarray]  # (features (K, 36) float32, labels (K, 6) float32)
@@ -317,6 +322,14 @@ def evaluation_episodes(clips: Sequence[PolicyClip], setting: str, seed: int) ->
         raise ValueError(f"unknown setting {setting!r}; expected one of {', '.join(ALL_SETTINGS)}")
     rng = np.random.default_rng([int(seed), ALL_SETTINGS.index(setting)])
     train, test_in, test_out = split_sets(clips)
+    if setting == PERSON_SETTING:
+        ordered = sorted((c for c in clips if c.labels is not None), key=lambda c: (c.user, c.clip_id))
+        context = {}
+        for c in ordered:
+            if c.split == "train":
+                context.setdefault(c.user, []).append(_whole(c))
+        return [Episode(target=t, context=list(context[t.user]), setting=setting)
+                for t in ordered if t.split == "test" and t.user in context]
     if setting == OWN_SETTING:
         return [
             Episode(target=t, context=[_whole(c) for c in test_out if c.user == t.user and not _same(c, t)],

@@ -19,9 +19,16 @@ Metrics per setting, averaged over the setting's episodes:
 - mse: mean over steps and the 6 motion dimensions of (y - mean)^2, in
   (m/s)^2 and (rad/s)^2, free-running, z = the mean of q(z|C).
 
-Two references get a row in every table: always commanding zero twist, and
-a ridge regression fitted on exactly each episode's context
-(`rtcohand_drake.learning.ridge_reference`, the last 1 s of features).
+Three references get a row in every table: always commanding zero twist, a
+ridge regression fitted on exactly each episode's context
+(`rtcohand_drake.learning.ridge_reference`, `--ridge WINDOW LAMBDA`), and a
+nearest-neighbour read of the recent hand motion fitted alike
+(`rtcohand_drake.learning.knn_reference`, `--knn WINDOW K`).
+
+`--checkpoint` also takes exported policy files (`models/cchp_default.pt`):
+a CCHP policy is rebuilt as the model it was exported from.
+`--settings Person` reads recorded people (`rtcohand_drake.data.import_shrec17`):
+each user's held-out clips with their own train clips as context.
 
 Writes DIR/results.json, DIR/results.md, and with the options the figures
 noise_sweep.png, spectrum.png, attention.png.
@@ -47,7 +54,12 @@ from rtcohand_drake.learning.checkpoint import load_checkpoint, parse_overrides
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
 MAX_SIGMA_T = 0.05  # m/s
 MAX_SIGMA_R = 0.1  # rad/s
-HIGH_FREQ_HZ = 1.0  # "high-frequency content": power above this, as a fraction of the total
+HIGH_FREQ_HZ = 1.0
+# The per-person references' settings (window in policy steps): the ridge's as chosen on simulated
+# development people; the nearest-neighbour read's as chosen on recorded development people
+# (docs/real_people.md). Both are options of the command, to tune them on other data.
+RIDGE_DEFAULT = (10, 100.0)
+KNN_DEFAULT = (20, 10)  # "high-frequency content": power above this, as a fraction of the total
 
 # The paper's Table "Test losses" (its own data): (ELBO loss, MSE); None = NA.
 PAPER_TABLE = {
@@ -65,6 +77,19 @@ PAPER_TABLE = {
     "CCHP (p_D,p_U)=(1,1)": [(-239.82, 1.8), (-13.61, 2.29), (577.09, 2.95), (618.49, 3.04), (465.95, 3.01),
                              (121.30, 2.52)],
 }
+
+
+def load_model_file(path: str, overrides: Optional[Dict] = None) -> Tuple[torch.nn.Module, Dict]:
+    """A training checkpoint, or an exported CCHP policy file rebuilt as the model it was made
+    from (`export.cchp_from_policy`; the exported step computes what the model computes)."""
+    from rtcohand_drake.learning.policy_file import torch_archive_kind
+
+    if torch_archive_kind(path, "checkpoint") == "torchscript":
+        from rtcohand_drake.learning.export import cchp_from_policy
+
+        model, card = cchp_from_policy(path, overrides)
+        return model, {**card, "kind": "cchp"}
+    return load_checkpoint(path, overrides)
 
 
 def model_name(payload: Dict) -> str:
@@ -125,17 +150,30 @@ def zero_twist_mse(episodes: Sequence) -> Optional[float]:
     return float(np.mean([np.mean(np.asarray(e.target.labels, np.float64) ** 2) for e in episodes]))
 
 
-def ridge_reference_mse(episodes: Sequence, window: int = 10, lam: float = 100.0) -> Optional[float]:
-    """MSE of a ridge regression fitted on each episode's own context (`RidgeReference`), like the models' MSE."""
-    from rtcohand_drake.learning.ridge_reference import RidgeReference
-
+def reference_mse(episodes: Sequence, make) -> Optional[float]:
+    """MSE of a reference fitted on each episode's own context (`make()` gives an unfitted one with
+    `fit(pieces)` and `predict(features)`), averaged over episodes like the models' MSE."""
     if not episodes:
         return None
     errors = []
     for e in episodes:
-        pred = RidgeReference(window, lam).fit(e.context).predict(e.target_features)
+        pred = make().fit(e.context).predict(e.target_features)
         errors.append(float(np.mean((np.asarray(e.target.labels, np.float64) - pred) ** 2)))
     return float(np.mean(errors))
+
+
+def ridge_reference_mse(episodes: Sequence, window: int = 10, lam: float = 100.0) -> Optional[float]:
+    """MSE of a ridge regression fitted on each episode's own context (`RidgeReference`), like the models' MSE."""
+    from rtcohand_drake.learning.ridge_reference import RidgeReference
+
+    return reference_mse(episodes, lambda: RidgeReference(window, lam))
+
+
+def knn_reference_mse(episodes: Sequence, window: int = 20, k: int = 10) -> Optional[float]:
+    """MSE of the nearest-neighbour read fitted on each episode's own context (`KnnReference`)."""
+    from rtcohand_drake.learning.knn_reference import KnnReference
+
+    return reference_mse(episodes, lambda: KnnReference(window, k))
 
 
 def _mean_std(values: List[Optional[float]]) -> Tuple[Optional[float], Optional[float]]:
@@ -188,6 +226,19 @@ def _cell(entry: Dict) -> str:
     return f"{el_s} / {entry['mse']:.4g} ± {entry.get('mse_std') or 0:.2g}"
 
 
+def reference_rows(results: Dict) -> List[Tuple[str, Dict]]:
+    """(label, {setting: mse}) of the references a results file holds: zero twist, then the fitted ones."""
+    ref = results.get("reference", {})
+    rows = [("zero twist", ref.get("zero_twist_mse", {}))]
+    if ref.get("ridge_mse"):
+        r = ref.get("ridge", {"window": 10, "lam": 100.0})
+        rows.append((f"ridge fitted to the context (window {r['window']}, lambda {r['lam']:g})", ref["ridge_mse"]))
+    if ref.get("knn_mse"):
+        k = ref["knn"]
+        rows.append((f"nearest-neighbour read of the context (window {k['window']}, k {k['k']})", ref["knn_mse"]))
+    return rows
+
+
 def markdown_report(results: Dict) -> str:
     lines = ["# Evaluation results", "",
              f"Data: `{results['data']}`. Episode seed {results['seed']}. "
@@ -203,12 +254,22 @@ def markdown_report(results: Dict) -> str:
     if zero:
         lines.append("| zero twist (reference) | - | " + " | ".join(
             "n/a" if zero.get(s) is None else f"n/a / {zero[s]:.4g}" for s in shown) + " |")
-    ridge = results.get("reference", {}).get("ridge_mse", {})
-    if ridge:
-        lines.append("| ridge fitted to the context (reference) | - | " + " | ".join(
-            "n/a" if ridge.get(s) is None else f"n/a / {ridge[s]:.4g}" for s in shown) + " |")
+    references = reference_rows(results)
+    for label, values in references[1:]:
+        lines.append(f"| {label} (reference) | - | " + " | ".join(
+            "n/a" if values.get(s) is None else f"n/a / {values[s]:.4g}" for s in shown) + " |")
     lines += ["", "Episodes per setting: " + ", ".join(
         f"{s} {results['episodes'].get(s, 0)}" for s in shown), ""]
+    if zero:
+        lines += ["## MSE as a share of commanding zero twist (lower is better; 1 = no better than zero)", "",
+                  "| Model | " + " | ".join(shown) + " |", "|" + "---|" * (len(shown) + 1)]
+        rows = [(name, {s: e["settings"].get(s, {}).get("mse") for s in shown})
+                for name, e in results["models"].items()] + references[1:]
+        for label, values in rows:
+            lines.append(f"| {label} | " + " | ".join(
+                "n/a" if values.get(s) is None or not zero.get(s) else f"{values[s] / zero[s]:.3f}"
+                for s in shown) + " |")
+        lines.append("")
     lines += ["## The paper's values (its real data; compare the ordering, not the numbers)", "",
               "| Model | " + " | ".join(SETTINGS) + " |", "|" + "---|" * (len(SETTINGS) + 1)]
     for name, row in PAPER_TABLE.items():
@@ -320,7 +381,8 @@ def plot_attention(model, episode, path: pathlib.Path) -> None:
 def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Sequence[str]] = None, seed: int = 0,
              settings: Sequence[str] = SETTINGS, sweep: bool = False, spectrum: bool = False,
              attention: bool = False, threads: int = 0, max_episodes: int = 0,
-             overrides: Optional[Dict] = None) -> Dict:
+             overrides: Optional[Dict] = None, ridge: Tuple[int, float] = RIDGE_DEFAULT,
+             knn: Tuple[int, int] = KNN_DEFAULT) -> Dict:
     from rtcohand_drake.data.sampling import evaluation_episodes
     from rtcohand_drake.learning.train import load_clips
 
@@ -328,7 +390,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         torch.set_num_threads(threads)
     loaded = []
     for i, ck in enumerate(checkpoints):
-        model, payload = load_checkpoint(ck, overrides)
+        model, payload = load_model_file(ck, overrides)
         name = names[i] if names else model_name(payload)
         loaded.append((name, ck, model, payload))
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
@@ -351,8 +413,11 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
                      # A policy that always commands zero twist: the floor any useful model must beat.
                      "reference": {"zero_twist_mse": {s: zero_twist_mse(episodes[s]) for s in settings},
                                    # Fitted to each episode's own context: the bar a context read must clear.
-                                   "ridge_mse": {s: ridge_reference_mse(episodes[s]) for s in settings},
-                                   "ridge": {"window": 10, "lam": 100.0}}}
+                                   "ridge_mse": {s: ridge_reference_mse(episodes[s], *ridge) for s in settings},
+                                   "ridge": {"window": ridge[0], "lam": ridge[1]},
+                                   # A nonlinear read of the recent hand motion, fitted to each context alike.
+                                   "knn_mse": {s: knn_reference_mse(episodes[s], *knn) for s in settings},
+                                   "knn": {"window": knn[0], "k": knn[1]}}}
     for name, entry in per_model.items():
         agg = {}
         for s in settings:
@@ -428,6 +493,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--attention", action="store_true", help="attention heatmap of the first CCHP checkpoint")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch default)")
     p.add_argument("--max-episodes", type=int, default=0, help="use at most this many episodes per setting (0: all)")
+    p.add_argument("--ridge", nargs=2, type=float, default=list(RIDGE_DEFAULT), metavar=("WINDOW", "LAMBDA"),
+                   help=f"the ridge reference's window (policy steps) and lambda (default {RIDGE_DEFAULT[0]} "
+                        f"{RIDGE_DEFAULT[1]:g})")
+    p.add_argument("--knn", nargs=2, type=int, default=list(KNN_DEFAULT), metavar=("WINDOW", "K"),
+                   help=f"the nearest-neighbour reference's window (policy steps) and k (default "
+                        f"{KNN_DEFAULT[0]} {KNN_DEFAULT[1]})")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="a model option that holds no parameters, for every checkpoint, e.g. "
                         "phi_signed_square_clamp=true (repeatable)")
@@ -440,7 +511,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
     results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,
                        args.noise_sweep, args.spectrum, args.attention, args.threads,
-                       args.max_episodes, parse_overrides(args.set))
+                       args.max_episodes, parse_overrides(args.set), (int(args.ridge[0]), float(args.ridge[1])),
+                       (int(args.knn[0]), int(args.knn[1])))
     print(markdown_report(results))
     return 0
 
