@@ -53,6 +53,7 @@ class LabelledClip:
     features: np.ndarray
     labels: np.ndarray
     active_dims: tuple[int, ...]
+    split: str = "none"
 
 
 @dc.dataclass
@@ -98,9 +99,30 @@ def play_clip(module, features: np.ndarray, keys, values, z, correction_weight: 
     return out
 
 
+Groups = list[tuple[list[int], list[int]]]  # (clips to play, clips that are their context)
+
+
+def fold_groups(n_clips: int, folds: int = 6) -> Groups:
+    """Clip i in fold i % folds, played with the other folds as context."""
+    if n_clips < 2:
+        raise ValueError("need at least two labelled clips (one to play, one as context)")
+    folds = max(2, min(folds, n_clips))
+    return [(list(range(f, n_clips, folds)), [i for i in range(n_clips) if i % folds != f]) for f in range(folds)]
+
+
+def split_groups(clips: Sequence[LabelledClip]) -> Groups:
+    """The recorded-people protocol: the clips of split "test" played with those of split "train" as context."""
+    test = [i for i, c in enumerate(clips) if c.split == "test"]
+    train = [i for i, c in enumerate(clips) if c.split == "train"]
+    if not test or not train:
+        raise ValueError("the split protocol needs clips of split 'test' and of split 'train'")
+    return [(test, train)]
+
+
 def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
-                   correction_weight: float = 1.0, lead: int = 0) -> list[np.ndarray]:
-    """The policy's output (T, 6) over every clip, each played with the other folds as context.
+                   correction_weight: float = 1.0, lead: int = 0, groups: Groups | None = None) -> list:
+    """The policy's output (T, 6) over every clip, each played with the other folds as context
+    (or as `groups` say; a clip no group plays gets None).
 
     `lead` > 0 pairs each context frame with the label `lead` frames later (the context's last
     `lead` frames and first `lead` labels dropped): a read of what the person will want."""
@@ -108,36 +130,31 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
 
     from rtcohand_drake.data.sampling import pack_context
 
-    if len(clips) < 2:
-        raise ValueError("need at least two labelled clips (one to play, one as context)")
-    folds = max(2, min(folds, len(clips)))
     means: list = [None] * len(clips)
-    for f in range(folds):
-        x_c, y_c, mask = pack_context([(c.features[: len(c.features) - lead], c.labels[lead:]) if lead
-                                       else (c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
+    for targets, context in groups or fold_groups(len(clips), folds):
+        x_c, y_c, mask = pack_context([(clips[i].features[: len(clips[i].features) - lead], clips[i].labels[lead:])
+                                       if lead else (clips[i].features, clips[i].labels) for i in context])
         with torch.no_grad():
             keys, values, z_mu, _ = module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
-        for i in range(f, len(clips), folds):
+        for i in targets:
             means[i] = play_clip(module, clips[i].features, keys, values, z_mu, correction_weight)
     return means
 
 
 def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, window: int = 10,
-                             lam: float = 100.0) -> list[np.ndarray]:
-    """The fitted-to-the-person reference over every clip: a ridge regression solved on the other
-    folds (`rtcohand_drake.learning.ridge_reference`), the same folds as `held_out_means`."""
+                             lam: float = 100.0, groups: Groups | None = None, make=None) -> list:
+    """A fitted-to-the-person reference over every clip, solved on the other folds (or as `groups`
+    say): by default the ridge regression (`rtcohand_drake.learning.ridge_reference`), or what
+    `make()` gives (an unfitted reference with `fit(pieces)` and `predict(features)`)."""
     from rtcohand_drake.learning.ridge_reference import RidgeReference
 
-    if len(clips) < 2:
-        raise ValueError("need at least two labelled clips (one to play, one as context)")
-    folds = max(2, min(folds, len(clips)))
+    make = make or (lambda: RidgeReference(window, lam))
     means: list = [None] * len(clips)
-    for f in range(folds):
-        ridge = RidgeReference(window, lam).fit(
-            [(c.features, c.labels) for i, c in enumerate(clips) if i % folds != f])
-        for i in range(f, len(clips), folds):
-            means[i] = ridge.predict(clips[i].features)
+    for targets, context in groups or fold_groups(len(clips), folds):
+        reference = make().fit([(clips[i].features, clips[i].labels) for i in context])
+        for i in targets:
+            means[i] = reference.predict(clips[i].features)
     return means
 
 
@@ -149,6 +166,8 @@ def held_out_readings(module, clips: Sequence[LabelledClip], folds: int = 6, cor
         means = held_out_means(module, clips, folds, correction_weight)
     readings = []
     for clip, means in zip(clips, means):
+        if means is None:  # not played (a context clip of the split protocol)
+            continue
         for d in clip.active_dims:
             label = clip.labels[:, d]
             peak = np.max(np.abs(label))
@@ -186,7 +205,7 @@ def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[
         if len(users) > 1:
             raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user")
         user = users[0]
-    mine = [LabelledClip(c.name, c.features, c.labels, tuple(int(d) for d in c.active_dims))
+    mine = [LabelledClip(c.name, c.features, c.labels, tuple(int(d) for d in c.active_dims), c.split)
             for c in clips if c.user == user]
     if len(mine) < 2:
         raise InputError(f"{path}: user {user!r} has {len(mine)} labelled clips; at least 2 are needed")
@@ -226,6 +245,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--correction-weight", type=float, default=None,
                    help="w of the policy's output r + w (mean - r) (default: the scenario's)")
     p.add_argument("--folds", type=int, default=6)
+    p.add_argument("--protocol", choices=("folds", "split"), default="folds",
+                   help="folds: every clip read with the other folds as context; split: the clips of split "
+                        "'test' read with those of split 'train' (recorded people, data.import_shrec17)")
+    p.add_argument("--ridge", nargs=2, type=float, default=None, metavar=("WINDOW", "LAMBDA"),
+                   help="the ridge reference's window (policy steps) and lambda (default 10 100)")
+    p.add_argument("--knn", nargs=2, type=int, default=None, metavar=("WINDOW", "K"),
+                   help="the nearest-neighbour reference's window (policy steps) and k (default 20 10)")
     p.add_argument("--rate-hz", type=float, default=10.0)
     args = p.parse_args(argv)
     if (args.context_file is None) == (args.user is None):
@@ -248,25 +274,52 @@ def main(argv: Sequence[str] | None = None) -> int:
         clips, who = builtin_clips(args.user, args.rate_hz, args.population_seed), args.user
     else:
         clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz)
-    means = held_out_means(module, clips, args.folds, weight)
+    from rtcohand_drake.learning.evaluate import KNN_DEFAULT, RIDGE_DEFAULT
+    from rtcohand_drake.learning.knn_reference import KnnReference
+
+    if args.protocol == "split":
+        try:
+            groups = split_groups(clips)
+        except ValueError as err:
+            raise InputError(f"--protocol split: user {who}: {err}") from None
+        how = f"the {len(groups[0][0])} clips of split 'test' read with the {len(groups[0][1])} of split 'train'"
+    else:
+        if len(clips) < 2:
+            raise InputError(f"user {who}: need at least two labelled clips (one to play, one as context)")
+        groups = fold_groups(len(clips), args.folds)
+        how = f"each read with the other {len(groups) - 1} of {len(groups)} folds as context"
+    ridge = tuple(args.ridge) if args.ridge else RIDGE_DEFAULT
+    knn = tuple(args.knn) if args.knn else KNN_DEFAULT
+    means = held_out_means(module, clips, correction_weight=weight, groups=groups)
     readings = held_out_readings(module, clips, means=means)
-    reference = held_out_reference_means(clips, args.folds)
-    reference_gains = {name: gain for name, _, gain, _ in
-                       motion_table(held_out_readings(None, clips, means=reference))}
-    zero = sum(float((c.labels ** 2).sum()) for c in clips)
-    error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(means, clips)) / max(zero, 1e-12)
-    reference_error = sum(float(((m - c.labels) ** 2).sum()) for m, c in zip(reference, clips)) / max(zero, 1e-12)
+    references = {
+        f"ridge (window {int(ridge[0])}, lambda {ridge[1]:g})": held_out_reference_means(
+            clips, window=int(ridge[0]), lam=ridge[1], groups=groups),
+        f"nearest neighbours (window {knn[0]}, k {knn[1]})": held_out_reference_means(
+            clips, groups=groups, make=lambda: KnnReference(int(knn[0]), int(knn[1]))),
+    }
+    reference_gains = {label: {name: gain for name, _, gain, _ in
+                               motion_table(held_out_readings(None, clips, means=m))}
+                       for label, m in references.items()}
+    played = [i for i, m in enumerate(means) if m is not None]
+    zero = sum(float((clips[i].labels ** 2).sum()) for i in played)
+
+    def share(outputs) -> float:
+        return sum(float(((outputs[i] - clips[i].labels) ** 2).sum()) for i in played) / max(zero, 1e-12)
+
     rows = motion_table(readings)
-    print(f"user {who}: {len(clips)} labelled clips, each read with the other {args.folds - 1} "
-          f"of {args.folds} folds as context; policy {model.name}, correction weight {weight:g}")
-    print("| motion | clips | reading gain (median) | verdict | ridge reference gain |")
-    print("|---|---|---|---|---|")
+    print(f"user {who}: {len(clips)} labelled clips, {how}; policy {model.name}, correction weight {weight:g}")
+    labels = list(references)
+    print("| motion | clips | reading gain (median) | verdict | " + " | ".join(f"{r} gain" for r in labels) + " |")
+    print("|---|---|---|---|" + "---|" * len(labels))
     for name, n, gain, word in rows:
-        print(f"| {name} | {n} | {gain:+.2f} | {word} | {reference_gains.get(name, float('nan')):+.2f} |")
+        print(f"| {name} | {n} | {gain:+.2f} | {word} | "
+              + " | ".join(f"{reference_gains[r].get(name, float('nan')):+.2f}" for r in labels) + " |")
     print(f"median reading gain over all {len(readings)} clip motions: "
           f"{np.median([r.gain for r in readings]):+.2f}")
-    print(f"held-out squared error over all clips: {error:.3f} of commanding zero twist "
-          f"(ridge fitted to the person's other clips: {reference_error:.3f})")
+    print(f"held-out squared error over the played clips: {share(means):.3f} of commanding zero twist "
+          f"(fitted to the person's context: " + ", ".join(f"{r} {share(m):.3f}" for r, m in references.items())
+          + ")")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
     poor = [name for name, _, gain, _ in rows if gain < WEAK]

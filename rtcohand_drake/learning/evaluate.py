@@ -270,6 +270,8 @@ def markdown_report(results: Dict) -> str:
                 "n/a" if values.get(s) is None or not zero.get(s) else f"{values[s] / zero[s]:.3f}"
                 for s in shown) + " |")
         lines.append("")
+    if not any(s in SETTINGS for s in shown):
+        return "\n".join(lines) + "\n"
     lines += ["## The paper's values (its real data; compare the ordering, not the numbers)", "",
               "| Model | " + " | ".join(SETTINGS) + " |", "|" + "---|" * (len(SETTINGS) + 1)]
     for name, row in PAPER_TABLE.items():
