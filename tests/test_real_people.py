@@ -229,3 +229,17 @@ def test_knn_reference_reads_a_stroke_with_a_return_the_right_way():
         active = y[:, 0] != 0
         assert np.sign(pred[active, 0].mean()) == sign
         assert np.mean((pred - y) ** 2) < 0.2 * np.mean(y.astype(float) ** 2)
+
+
+def test_context_reading_split_protocol_reads_the_held_out_clips(natural):
+    run = _run("rtcohand_drake.context_reading", "--context-file", str(natural), "--context-user", "s05",
+               "--protocol", "split", "--knn", "6", "3")
+    assert run.returncode == 0, run.stderr
+    out = run.stdout
+    assert "the 12 clips of split 'test' read with the 24 of split 'train'" in out
+    rows = [line for line in out.splitlines() if line.startswith("| T") or line.startswith("| R")]
+    assert len(rows) == 12 and all(line.split("|")[2].strip() == "1" for line in rows)
+    assert "nearest neighbours (window 6, k 3)" in out and "of commanding zero twist" in out
+    # A file with no test clips cannot be read this way: one line, status 2.
+    run = _run("rtcohand_drake.context_reading", "--user", "u10", "--protocol", "split")
+    assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1 and "split" in run.stderr

@@ -251,7 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--ridge", nargs=2, type=float, default=None, metavar=("WINDOW", "LAMBDA"),
                    help="the ridge reference's window (policy steps) and lambda (default 10 100)")
     p.add_argument("--knn", nargs=2, type=int, default=None, metavar=("WINDOW", "K"),
-                   help="the nearest-neighbour reference's window (policy steps) and k (default 20 10)")
+                   help="the nearest-neighbour reference's window (policy steps) and k (default 20 20)")
     p.add_argument("--rate-hz", type=float, default=10.0)
     args = p.parse_args(argv)
     if (args.context_file is None) == (args.user is None):

@@ -54,12 +54,12 @@ from rtcohand_drake.learning.checkpoint import load_checkpoint, parse_overrides
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
 MAX_SIGMA_T = 0.05  # m/s
 MAX_SIGMA_R = 0.1  # rad/s
-HIGH_FREQ_HZ = 1.0
+HIGH_FREQ_HZ = 1.0  # "high-frequency content": power above this, as a fraction of the total
 # The per-person references' settings (window in policy steps): the ridge's as chosen on simulated
 # development people; the nearest-neighbour read's as chosen on recorded development people
 # (docs/real_people.md). Both are options of the command, to tune them on other data.
 RIDGE_DEFAULT = (10, 100.0)
-KNN_DEFAULT = (20, 10)  # "high-frequency content": power above this, as a fraction of the total
+KNN_DEFAULT = (20, 20)
 
 # The paper's Table "Test losses" (its own data): (ELBO loss, MSE); None = NA.
 PAPER_TABLE = {

@@ -32,7 +32,7 @@ def net_motions(x: np.ndarray, window: int) -> np.ndarray:
 class KnnReference:
     """Fit on [(features (T, 36), labels (T, 6)), ...]; predict a (T, 6) twist for a (T, 36) stream."""
 
-    def __init__(self, window: int = 20, k: int = 10):
+    def __init__(self, window: int = 20, k: int = 20):
         if window < 1 or k < 1:
             raise ValueError(f"need window >= 1 and k >= 1, got {window}, {k}")
         self.window, self.k = int(window), int(k)
