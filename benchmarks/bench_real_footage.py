@@ -14,9 +14,11 @@ palm's path in U (the palm part's origin, `part_frames`), and per clip:
 - tracked: the share of frames with a hand;
 - the 5th-95th percentile range of the palm along X, Y (depth) and Z of U;
 - ratio: the depth range over the range along the swipe, for a clip named
-  `*left_right*` (X) or `*up_down*` (Z); the issue's target is <= 0.5.
+  `*left_right*` (X) or `*up_down*` (Z); the target is <= 0.5;
+- the median speed of the palm in depth from frame to frame (m/s): the
+  jitter the policy would read as a Ty command.
 
-Lag: a drawn-free synthetic hand (the project's hand model, at 0.3 m) moves
+Lag: a synthetic hand (the project's hand model, 0.3 m from the camera) moves
 0.10 m in depth, as a step and as a 0.3 s smooth move, sampled at `--rate-hz`
 (the policy's rate); the lag is how much later the filtered depth crosses
 half the move than the unfiltered one (`depth_lag_s`).
@@ -82,8 +84,8 @@ def detect_clip(path: Path, camera) -> list:
     return frames
 
 
-def palm_path(frames, pose_filter) -> np.ndarray:
-    """The palm's origin in U (n_tracked, 3) through a fresh `HandPoseFilter`."""
+def palm_path(frames, pose_filter) -> tuple[np.ndarray, np.ndarray]:
+    """The frame times (n_tracked,) and the palm's origin in U (n_tracked, 3) through a fresh `HandPoseFilter`."""
     from rtcohand_drake.data.hand_features import part_frames
     from rtcohand_drake.vision.calibration import CameraCalibration
     from rtcohand_drake.vision.hand_pose import keypoints_in_camera
@@ -91,7 +93,7 @@ def palm_path(frames, pose_filter) -> np.ndarray:
 
     calibration = CameraCalibration()
     steady = HandPoseFilter(pose_filter)
-    palms = []
+    times, palms = [], []
     for t, size, hand in frames:
         if hand is None:
             continue
@@ -100,20 +102,23 @@ def palm_path(frames, pose_filter) -> np.ndarray:
         if points_C is None:
             continue
         points_U = calibration.to_user_frame(steady.steady(hand, points_C, K, t))
+        times.append(t)
         palms.append(part_frames(points_U)[1][0])
-    return np.array(palms).reshape(-1, 3)
+    return np.array(times), np.array(palms).reshape(-1, 3)
 
 
 def swipe_axis(name: str) -> int | None:
     return 0 if "left_right" in name else 2 if "up_down" in name else None
 
 
-def clip_figures(name: str, frames, palms: np.ndarray) -> dict:
+def clip_figures(name: str, frames, times: np.ndarray, palms: np.ndarray) -> dict:
     spread = lambda x: float(np.percentile(x, 95) - np.percentile(x, 5)) if len(x) else float("nan")
     ranges = [spread(palms[:, k]) for k in range(3)]
     axis = swipe_axis(name)
+    depth_speed = np.abs(np.diff(palms[:, 1])) / np.diff(times) if len(times) > 1 else np.array([np.nan])
     return {"frames": len(frames), "tracked": len(palms) / len(frames),
             "x_range_m": ranges[0], "depth_range_m": ranges[1], "z_range_m": ranges[2],
+            "depth_speed_median_m_s": float(np.median(depth_speed)),
             "swipe_axis": "XYZ"[axis] if axis is not None else None,
             "depth_over_swipe": ranges[1] / ranges[axis] if axis is not None else None}
 
@@ -135,18 +140,18 @@ def main() -> None:
                   for blur in (False, True)}
     results = {"clips": [q.name for q in paths], "candidates": {}}
     for label, (blur, pose_filter) in candidates().items():
-        per_clip = {name: clip_figures(name, frames, palm_path(frames, pose_filter))
+        per_clip = {name: clip_figures(name, frames, *palm_path(frames, pose_filter))
                     for name, frames in detections[blur].items()}
         lag = {kind: depth_lag_s(pose_filter, args.rate_hz, rise_s) for kind, rise_s in (("step", 0.0), ("smooth_0.3s", 0.3))}
         results["candidates"][label] = {"pose_filter": dc.asdict(pose_filter), "blur": blur, "clips": per_clip,
                                         "lag_ms": {k: v * 1e3 for k, v in lag.items()}}
     for label, r in results["candidates"].items():
         print(f"\n{label}: lag {r['lag_ms']['step']:.0f} ms (step), {r['lag_ms']['smooth_0.3s']:.0f} ms (0.3 s move)")
-        print(f"  {'clip':20s} tracked  X(m)   Y(m)   Z(m)  Y/swipe")
+        print(f"  {'clip':20s} tracked  X(m)   Y(m)   Z(m)  Y/swipe  |dY/dt|(m/s)")
         for name, c in r["clips"].items():
             ratio = "" if c["depth_over_swipe"] is None else f"{c['depth_over_swipe']:.2f}"
             print(f"  {name:20s} {c['tracked']:6.2f} {c['x_range_m']:6.3f} {c['depth_range_m']:6.3f} "
-                  f"{c['z_range_m']:6.3f}  {ratio}")
+                  f"{c['z_range_m']:6.3f}  {ratio:7s}  {c['depth_speed_median_m_s']:.2f}")
     if args.out is not None:
         args.out.write_text(json.dumps(results, indent=2) + "\n")
 
