@@ -18,6 +18,11 @@ palm's path in U (the palm part's origin, `part_frames`), and per clip:
 - the median speed of the palm in depth from frame to frame (m/s): the
   jitter the policy would read as a Ty command.
 
+At the policy's rate: the same figures for the code before and the default,
+with each clip played as `--video` plays it (`VideoFileTracker` polled at
+`--rate-hz`, so MediaPipe sees only the frames the policy asks for), through
+`HandPipeline`, the run's own path.
+
 Lag: a synthetic hand (the project's hand model, 0.3 m from the camera) moves
 0.10 m in depth, as a step and as a 0.3 s smooth move, sampled at `--rate-hz`
 (the policy's rate); the lag is how much later the filtered depth crosses
@@ -107,6 +112,27 @@ def palm_path(frames, pose_filter) -> tuple[np.ndarray, np.ndarray]:
     return np.array(times), np.array(palms).reshape(-1, 3)
 
 
+def policy_rate_path(path: Path, camera, rate_hz: float) -> tuple[list, np.ndarray, np.ndarray]:
+    """The clip as the run's video source reads it: per policy step whether a hand was seen; the times
+    and palm origins in U of the steps with one."""
+    from rtcohand_drake.data.hand_features import part_frames
+    from rtcohand_drake.vision.calibration import CameraCalibration
+    from rtcohand_drake.vision.capture import HandPipeline, VideoFileTracker
+
+    tracker = VideoFileTracker(path, HandPipeline(CameraCalibration(), camera))
+    steps, times, palms = [], [], []
+    try:
+        for k in range(int(tracker.duration_s * rate_hz)):
+            keypoints, t = tracker.latest(k / rate_hz)
+            steps.append(keypoints is not None)
+            if keypoints is not None:
+                times.append(t)
+                palms.append(part_frames(keypoints)[1][0])
+    finally:
+        tracker.close()
+    return steps, np.array(times), np.array(palms).reshape(-1, 3)
+
+
 def swipe_axis(name: str) -> int | None:
     return 0 if "left_right" in name else 2 if "up_down" in name else None
 
@@ -130,7 +156,7 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args()
 
-    from rtcohand_drake.vision.config import Camera
+    from rtcohand_drake.vision.config import Camera, PoseFilter
     from rtcohand_drake.vision.hand_pose_filter import depth_lag_s
 
     paths = sorted(q for q in args.clips.iterdir() if q.suffix.lower() in VIDEO_SUFFIXES)
@@ -145,8 +171,18 @@ def main() -> None:
         lag = {kind: depth_lag_s(pose_filter, args.rate_hz, rise_s) for kind, rise_s in (("step", 0.0), ("smooth_0.3s", 0.3))}
         results["candidates"][label] = {"pose_filter": dc.asdict(pose_filter), "blur": blur, "clips": per_clip,
                                         "lag_ms": {k: v * 1e3 for k, v in lag.items()}}
-    for label, r in results["candidates"].items():
-        print(f"\n{label}: lag {r['lag_ms']['step']:.0f} ms (step), {r['lag_ms']['smooth_0.3s']:.0f} ms (0.3 s move)")
+    results["policy_rate"] = {}
+    for label, camera in (("before (no blur, no filter)", Camera(blur_sigma_px=0.0, pose_filter=PoseFilter(enabled=False))),
+                          ("default", Camera())):
+        per_clip = {}
+        for q in paths:
+            steps, times, palms = policy_rate_path(q, camera, args.rate_hz)
+            per_clip[q.stem] = clip_figures(q.stem, steps, times, palms)
+        results["policy_rate"][label] = per_clip
+    for label, r in [*results["candidates"].items(), *((f"at {args.rate_hz:g} Hz, {k}", {"clips": v})
+                                                       for k, v in results["policy_rate"].items())]:
+        lag = r.get("lag_ms")
+        print(f"\n{label}" + (f": lag {lag['step']:.0f} ms (step), {lag['smooth_0.3s']:.0f} ms (0.3 s move)" if lag else ""))
         print(f"  {'clip':20s} tracked  X(m)   Y(m)   Z(m)  Y/swipe  |dY/dt|(m/s)")
         for name, c in r["clips"].items():
             ratio = "" if c["depth_over_swipe"] is None else f"{c['depth_over_swipe']:.2f}"
