@@ -3,7 +3,7 @@
 Each frame's metric fit (`hand_pose.keypoints_in_camera`) places MediaPipe's
 metric hand where it covers the image landmarks, so the hand's depth is
 proportional to the size MediaPipe guesses for it in that frame. On real
-footage that guess varies by 5-20 % from frame to frame, which puts the
+footage that guess varies by 2-18 % (one sigma) from frame to frame, which puts the
 palm's depth through a range as wide as a swipe (docs/camera.md). Scaling
 the camera-frame points about the camera's centre changes their depth and
 leaves their image exactly as it was, so `HandPoseFilter` only chooses, per
@@ -198,7 +198,8 @@ def palm_spans_depth(depth, detection, camera_matrix, person_spans_m) -> float:
     the palm is small beside its distance; lens distortion is neglected)."""
     K = camera_matrix
     rays = (detection.image_px - K[:2, 2]) / np.diag(K)[:2]  # image points at unit depth
-    return float(np.min(person_spans_m / palm_spans(rays)))
+    with np.errstate(divide="ignore"):  # a span seen end-on: infinite, never the least
+        return float(np.min(person_spans_m / palm_spans(rays)))
 
 
 DEPTH_CUES = {"palm_spans": palm_spans_depth, "fixed_palm": fixed_palm_depth, "fit": fit_depth}
