@@ -30,6 +30,7 @@ from rtcohand_drake.systems.policy import Policy
 from rtcohand_drake.systems.safety.config import Safety
 from rtcohand_drake.systems.scripted_twist import TwistSegment
 from rtcohand_drake.vision.config import Camera
+from rtcohand_drake.vision.hand_pose_filter import DEPTH_CUES, SMOOTHERS
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -179,6 +180,18 @@ def _check_values(s: Scenario, source: str) -> None:
     need(all(0.0 <= v <= 1.0 for v in (c.min_detection_confidence, c.min_presence_confidence,
                                        c.min_tracking_confidence)), "camera confidence thresholds must be in [0, 1]")
     need(c.hand in ("right", "left", "largest"), f"camera.hand must be right, left or largest, got {c.hand!r}")
+    need(0 <= c.blur_sigma_px <= 5, "camera.blur_sigma_px must be in [0, 5]")
+    pf = c.pose_filter
+    need(pf.depth_cue in DEPTH_CUES, f"camera.pose_filter.depth_cue must be one of {', '.join(DEPTH_CUES)}, "
+                                     f"got {pf.depth_cue!r}")
+    need(pf.smoother in SMOOTHERS, f"camera.pose_filter.smoother must be one of {', '.join(SMOOTHERS)}, "
+                                   f"got {pf.smoother!r}")
+    need(pf.palm_size_m >= 0 and pf.palm_size_from_first_s >= 0,
+         "camera.pose_filter: palm_size_m and palm_size_from_first_s must be >= 0")
+    need(min(pf.min_cutoff_hz, pf.derivative_cutoff_hz, pf.kalman_accel_m_s2, pf.kalman_depth_noise_m,
+             pf.max_depth_speed_m_s, pf.reset_after_s) > 0 and pf.beta_hz_per_m_s >= 0 and pf.jump_floor_m >= 0,
+         "camera.pose_filter: cutoffs, Kalman noises, max_depth_speed_m_s and reset_after_s must be > 0, "
+         "beta_hz_per_m_s and jump_floor_m >= 0")
     h = s.hand_sign
     need(h.hold_s > 0 and h.period_s > 0, "hand_sign.hold_s and hand_sign.period_s must be > 0")
     need(0 < h.fist_below < h.open_above, "hand_sign: need 0 < fist_below < open_above")

@@ -17,7 +17,7 @@ when no hand is seen, and the time of its frame on the diagram's clock.
   leaves the last time in place (frozen), a closed one too.
 
 `HandPipeline` is the shared part: landmarks (MediaPipe), the hand to follow,
-and the metric fit into U. It records how long each frame took. Given a
+the metric fit, held steady in depth (`HandPoseFilter`), and into U. It records how long each frame took. Given a
 `MarkerTracker` it also finds an ArUco-marked object's pose in U in each
 frame (the recorder's `--labels aruco`): `marker()` on a tracker gives the
 pose seen in the frame `latest` last returned.
@@ -35,7 +35,8 @@ import numpy as np
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.vision.calibration import CameraCalibration
 from rtcohand_drake.vision.config import Camera
-from rtcohand_drake.vision.hand_pose import choose_hand, keypoints_in_user_frame
+from rtcohand_drake.vision.hand_pose import choose_hand, keypoints_in_camera
+from rtcohand_drake.vision.hand_pose_filter import HandPoseFilter
 from rtcohand_drake.vision.landmarker import HandLandmarker
 
 
@@ -47,6 +48,7 @@ class HandPipeline:
         self.calibration = calibration
         self.config = config or Camera()
         self.landmarker = HandLandmarker(self.config, video=video)
+        self.pose_filter = HandPoseFilter(self.config.pose_filter)
         self.marker_tracker = marker_tracker
         self.last_marker = None  # (R_UM, p_UM) in the last frame processed, or None
         self.processing_s: list[float] = []  # per frame: frame in hand -> keypoints in U
@@ -55,7 +57,13 @@ class HandPipeline:
         start = time.perf_counter()
         hand = choose_hand(self.landmarker.detect(frame_bgr, time_s), self.config)
         h, w = frame_bgr.shape[:2]
-        keypoints = None if hand is None else keypoints_in_user_frame(hand, self.calibration, (w, h))
+        keypoints = None
+        if hand is not None:
+            K = self.calibration.camera_matrix((w, h))
+            points_C = keypoints_in_camera(hand, K, self.calibration.distortion_coefficients())
+            if points_C is not None:
+                points_C = self.pose_filter.steady(hand, points_C, K, time_s)
+                keypoints = self.calibration.to_user_frame(points_C)
         self.processing_s.append(time.perf_counter() - start)
         if self.marker_tracker is not None:
             found = self.marker_tracker.pose_in_camera(frame_bgr, self.calibration.camera_matrix((w, h)),
