@@ -1,0 +1,140 @@
+"""What limits a read of recorded people: where the error sits, and what a perfect classifier would score.
+
+    python benchmarks/real_people_limits.py --data FILE.h5 [--ridge 30 3000] [--knn 20 20] [--out DIR]
+
+On the Person setting of an imported file (`data.import_shrec17`: each
+person's held-out clips, their other clips as context), all as a share of
+commanding zero twist, the metric of `evaluate`:
+
+- **late oracle**: a read that knows the held-out clip's command exactly, but
+  only `d` seconds after its label starts, and commands zero before: the
+  price of the time any causal read needs to tell gestures apart;
+- **where the error sits**, for each per-person reference: before the
+  gesture, in its first 0.5 s, later in the gesture, and after it;
+- **whole-gesture nearest neighbour**: the share of held-out clips whose
+  nearest context clip (the path of the mean of the 21 keypoints from the gesture's start,
+  resampled to 15 points, after a 5-frame median filter of the raw
+  keypoints) has the same command. It sees the whole gesture at once, so it
+  bounds what the hand data tell about the gesture, not what a causal read
+  can do in time.
+
+Writes DIR/real_people_limits.json when --out is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+DELAYS_S = (0.3, 0.5, 0.8)
+RATE_HZ = 10.0
+EARLY_S = 0.5
+
+
+def late_oracle(episodes, delay_s: float) -> float:
+    errors, zeros = [], []
+    for e in episodes:
+        y = np.asarray(e.target.labels, np.float64)
+        pred = np.zeros_like(y)
+        on = np.flatnonzero(np.abs(y).sum(1) > 0)
+        if on.size:
+            start = on[0] + int(round(delay_s * RATE_HZ))
+            pred[start:] = y[start:]
+        errors.append(np.mean((y - pred) ** 2))
+        zeros.append(np.mean(y ** 2))
+    return float(np.mean(errors) / np.mean(zeros))
+
+
+def error_by_phase(episodes, make) -> dict:
+    parts = dict.fromkeys(("before", "first 0.5 s", "later in the gesture", "after"), 0.0)
+    zero = 0.0
+    early = int(round(EARLY_S * RATE_HZ))
+    for e in episodes:
+        y = np.asarray(e.target.labels, np.float64)
+        err = ((y - make().fit(e.context).predict(e.target_features)) ** 2).sum(1) / y.size
+        on = np.flatnonzero(np.abs(y).sum(1) > 0)
+        a, b = on[0], on[-1]
+        parts["before"] += err[:a].sum()
+        parts["first 0.5 s"] += err[a:a + early].sum()
+        parts["later in the gesture"] += err[a + early:b + 1].sum()
+        parts["after"] += err[b + 1:].sum()
+        zero += np.mean(y ** 2)
+    return {k: float(v / zero) for k, v in parts.items()}
+
+
+def hand_path(clip, points: int = 15) -> np.ndarray:
+    on = np.flatnonzero(np.abs(clip.object_velocity).max(1) > 0)
+    kp = np.asarray(clip.keypoints[on[0]:on[-1] + 1], np.float64)
+    kp = np.stack([np.median(kp[max(0, i - 2):i + 3], 0) for i in range(len(kp))])
+    path = kp.mean(1)
+    path = path - path[0]
+    return path[np.linspace(0, len(path) - 1, points).round().astype(int)].reshape(-1)
+
+
+def command_of(clip) -> tuple[int, int]:
+    total = np.asarray(clip.object_velocity, np.float64).sum(0)
+    d = int(np.argmax(np.abs(total)))
+    return d, int(np.sign(total[d]))
+
+
+def whole_gesture_accuracy(path: Path) -> float:
+    from rtcohand_drake.data.dataset import read_dataset
+
+    clips = [c for c in read_dataset(path) if c.object_velocity is not None]
+    hits = []
+    for user in sorted({c.user for c in clips}):
+        train = [c for c in clips if c.user == user and c.split == "train"]
+        test = [c for c in clips if c.user == user and c.split == "test"]
+        if not train:
+            continue
+        keys = np.stack([hand_path(c) for c in train])
+        for c in test:
+            nearest = train[int(np.argmin(((keys - hand_path(c)) ** 2).sum(1)))]
+            hits.append(command_of(nearest) == command_of(c))
+    return float(np.mean(hits))
+
+
+def main(argv=None) -> int:
+    from rtcohand_drake.data.sampling import evaluation_episodes
+    from rtcohand_drake.learning.knn_reference import KnnReference
+    from rtcohand_drake.learning.ridge_reference import RidgeReference
+    from rtcohand_drake.learning.train import load_clips
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", required=True, type=Path)
+    p.add_argument("--ridge", nargs=2, type=float, default=[30, 3000], metavar=("WINDOW", "LAMBDA"))
+    p.add_argument("--knn", nargs=2, type=int, default=[20, 20], metavar=("WINDOW", "K"))
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args(argv)
+    episodes = evaluation_episodes(load_clips(str(args.data), RATE_HZ), "Person", 0)
+    if not episodes:
+        raise SystemExit(f"{args.data}: no Person episodes (clips of split 'test' with 'train' clips of the same user)")
+    result = {
+        "data": str(args.data), "episodes": len(episodes),
+        "late_oracle": {f"{d:g} s": late_oracle(episodes, d) for d in DELAYS_S},
+        "error_by_phase": {
+            f"ridge {int(args.ridge[0])} {args.ridge[1]:g}": error_by_phase(
+                episodes, lambda: RidgeReference(int(args.ridge[0]), args.ridge[1])),
+            f"nearest neighbours {args.knn[0]} {args.knn[1]}": error_by_phase(
+                episodes, lambda: KnnReference(*args.knn)),
+        },
+        "whole_gesture_nearest_neighbour_accuracy": whole_gesture_accuracy(args.data),
+    }
+    print(f"{args.data}: {len(episodes)} held-out clips")
+    print("late oracle (share of zero twist): " + ", ".join(
+        f"knows the command {k} after the label starts {v:.3f}" for k, v in result["late_oracle"].items()))
+    for name, parts in result["error_by_phase"].items():
+        print(f"{name}: total {sum(parts.values()):.3f} = " + " + ".join(f"{v:.3f} {k}" for k, v in parts.items()))
+    print(f"whole-gesture nearest neighbour names the command of "
+          f"{100 * result['whole_gesture_nearest_neighbour_accuracy']:.0f} % of the held-out clips")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "real_people_limits.json").write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
