@@ -93,7 +93,16 @@ def test_cli_prints_a_row_per_motion(tmp_path, capsys):
     assert "median reading gain" in out
     poor = [line.split("|")[1].strip() for line in rows if "| poor |" in line]
     assert poor  # an untrained policy reads some motions poorly, and is told what to do about them
-    assert ("poorly read: " + ", ".join(poor) + ". ") in out and "Record a different gesture" in out
+    # Each poor motion gets one piece of advice: held motion when a read of the motion's shape (the
+    # nearest-neighbour reference, the last column) reads it, a different gesture when nothing does.
+    cells = {line.split("|")[1].strip(): line.split("|") for line in rows}
+    by_shape = [m for m in poor if float(cells[m][-2]) >= cr.READS]
+    unread = [m for m in poor if m not in by_shape]
+    if unread:
+        assert ("poorly read: " + ", ".join(unread) + ". ") in out and "Record a different gesture" in out
+    if by_shape:
+        assert ("read by its shape but not by the policy: " + ", ".join(by_shape) + ". ") in out
+    assert ("poorly read" in out) == bool(unread) and ("read by its shape" in out) == bool(by_shape)
 
 
 def test_cli_gives_no_advice_when_every_motion_reads(capsys):

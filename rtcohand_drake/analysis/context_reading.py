@@ -42,6 +42,13 @@ READS, WEAK = 0.5, 0.2  # verdict thresholds on the reading gain
 POOR_ADVICE = ("poorly read: {motions}. The arm will barely follow these gestures. Record a different "
                "gesture for them: a move or turn of the whole hand, or a sweep with the fingers "
                "extended (a spread or thumb sweep of a curled hand does not show its direction)")
+# What a person can do about a motion the policy reads poorly although a read of the whole recent
+# motion (the nearest-neighbour reference) reads it: the hand shows the gesture, but as a stroke or
+# shape (out and back, a short flick) where the policy reads a motion held while the part should move.
+STROKE_ADVICE = ("read by its shape but not by the policy: {motions}. These gestures are told apart by "
+                 "the course of the stroke, and the policy reads the hand's motion while the part should "
+                 "move: keep moving or turning the hand for as long as the part should, rather than "
+                 "stroking out and back")
 ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
 
 
@@ -323,8 +330,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
     poor = [name for name, _, gain, _ in rows if gain < WEAK]
-    if poor:
-        print(POOR_ADVICE.format(motions=", ".join(poor)))
+    shape = reference_gains[labels[1]]
+    by_shape = [name for name in poor if shape.get(name, float("nan")) >= READS]
+    unread = [name for name in poor if name not in by_shape]
+    if by_shape:
+        print(STROKE_ADVICE.format(motions=", ".join(by_shape)))
+    if unread:
+        print(POOR_ADVICE.format(motions=", ".join(unread)))
     return 0
 
 
