@@ -171,3 +171,25 @@ def test_population_needs_context():
           f"zero {r['zero_mse']:.4f})")
     assert r["per_user_mse"] < 0.6 * r["zero_mse"]  # the per-user regressor learns something real
     assert r["ratio"] >= 2.0
+
+
+def test_single_stroke_users_stroke_out_and_back_and_others_are_drawn_as_before():
+    """`p_single_stroke`: a user who strokes makes each move as one short stroke that comes back; the
+    rest of their profile, and every user of a population without strokes, is drawn as before."""
+    strokes = replace(CONFIG, p_single_stroke=1.0, single_stroke_return=(1.0, 1.0), single_stroke_s=(1.2, 1.2))
+    plain, _, _ = simulate_user(CONFIG, 3, "out-sample", seed=5)
+    user, clips, truths = simulate_user(strokes, 3, "out-sample", seed=5)
+    assert user.single_stroke and not plain.single_stroke and user.stroke_return == 1.0
+    assert user.gestures == plain.gestures and user.speed_m_s == plain.speed_m_s  # drawn before the stroke
+    moves = [(c, tr) for c, tr in zip(clips, truths) if len(c.active_dims) == 1
+             and user.gestures[(int(c.active_dims[0]), 1)].kind == "move"]
+    assert moves
+    for c, tr in moves:
+        span = np.flatnonzero(tr.envelope > 0.5) / c.fps
+        assert 0.7 < span[-1] - span[0] < 1.05  # the stroke's 1.2 s, less half of each ramp (0.2-0.45 s)
+        palm = tr.keypoints_clean[:, [0, 5, 9, 13, 17]].mean(1)
+        excursion = np.linalg.norm(palm - palm[0], axis=1)
+        assert excursion.max() > 0.02 and excursion[-1] < 0.35 * excursion.max()  # out, and back
+    for c, tr in zip(clips, truths):  # the label still asks for the motion over the whole stroke
+        d = int(c.active_dims[0])
+        assert np.abs(tr.intent[tr.envelope > 0.9, d]).min() > 0

@@ -1,6 +1,7 @@
 """Generate a simulated gesture dataset (docs/interfaces.md, the gesture dataset file).
 
     python -m rtcohand_drake.data.generate --out PATH.h5 [--users 15] [--seed N] [--fps 30]
+        [--single-stroke-share P]
 
 Bad arguments or an unwritable output exit with status 2 and one line on stderr.
 """
@@ -29,6 +30,13 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _share(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text}")
+    return value
+
+
 def _fps(text: str) -> float:
     value = float(text)
     if not value >= 5.0:
@@ -42,10 +50,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--users", type=_positive_int, default=15, help="number of users (2/3 in-sample)")
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.add_argument("--fps", type=_fps, default=GeneratorConfig.fps, help="keypoint frame rate, Hz")
+    parser.add_argument("--single-stroke-share", type=_share, default=GeneratorConfig.p_single_stroke,
+                        help="share of users who make each move or turn as one stroke out and partly back, "
+                             "as recorded people do (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     args = parser.parse_args(argv)
 
-    config = replace(GeneratorConfig(), fps=args.fps)
+    config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share)
     start = time.perf_counter()
 
     def progress(done: int, total: int, user) -> None:

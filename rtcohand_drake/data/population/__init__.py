@@ -146,6 +146,8 @@ def simulate_clip(
     up = float(rng.uniform(*config.ramp_s))
     down = float(rng.uniform(*config.ramp_s))
     off = N / fps - float(rng.uniform(*config.tail_s)) - down
+    if user.single_stroke:  # one short stroke: the gesture lasts the stroke's duration, then rest
+        off = min(off, on + float(rng.uniform(*config.single_stroke_s)) - down)
     intensity = float(np.exp(rng.normal(0.0, config.intensity_log_sd)))
 
     envs = []
@@ -161,8 +163,9 @@ def simulate_clip(
         drifts.append(np.cumsum(stroke_profile(user, a, t, phase0)) * dt)  # seconds of full-speed motion so far
         # A person paces a steady move or turn to stay within reach over the whole gesture.
         total = max(float(np.sum(a)) * dt, 1e-3)
-        speeds.append(min(user.speed_m_s * intensity, 0.85 * config.max_excursion_m / total))
-        rates.append(min(user.rate_rad_s * intensity, 0.85 * config.max_turn_rad / total))
+        gain = user.stroke_speed_gain  # 1 unless the user strokes
+        speeds.append(min(gain * user.speed_m_s * intensity, 0.85 * config.max_excursion_m / total))
+        rates.append(min(gain * user.rate_rad_s * intensity, 0.85 * config.max_turn_rad / total))
     curl, abduction, thumb_pose, translation, turn_angles = hand_articulation(
         config, user, motions, envs, drifts, speeds, rates, t, intensity, phase0, on)
 

@@ -34,6 +34,13 @@ class GeneratorConfig:
     p_repeated_rhythm: float = 0.4  # share of users who gesture in repeated strokes
     stroke_freq_hz: tuple[float, float] = (0.8, 1.6)  # repeated strokes
     stroke_amplitude: tuple[float, float] = (1.3, 2.2)  # stroke speed relative to the net drift
+    # Users who make each move or turn as one stroke, out and partly back, short and fast, as recorded
+    # people do (docs/real_people.md, "Recorded hands against simulated ones": 1.7 s, a third of the
+    # way back and three times as fast, medians). 0: nobody (the default population is unchanged).
+    p_single_stroke: float = 0.0
+    single_stroke_s: tuple[float, float] = (1.1, 2.5)  # the stroke's duration (recorded: 25-75 %)
+    single_stroke_return: tuple[float, float] = (0.0, 1.0)  # how far back it comes (0 one way, 1 all the way)
+    single_stroke_speed_gain: tuple[float, float] = (2.0, 4.0)  # peak speed against the user's steady speed
     p_curled_posture: float = 0.3  # share of users who curl the fingers while gesturing
     p_turn_about_elbow: float = 0.35  # share of users who turn about the elbow (hand moves)
     elbow_offset_m: tuple[float, float] = (0.18, 0.26)  # elbow behind the wrist

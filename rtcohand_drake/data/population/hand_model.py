@@ -118,7 +118,19 @@ def gesture_envelope(t: np.ndarray, on: float, ramp_up: float, off: float, ramp_
 
 
 def stroke_profile(user: UserProfile, envelope: np.ndarray, t: np.ndarray, phase0: float) -> np.ndarray:
-    """Speed profile of a move or turn (relative to full speed): steady, or the user's repeated strokes."""
+    """Speed profile of a move or turn (relative to full speed): steady, the user's repeated strokes, or
+    one stroke out and back over the gesture.
+
+    One stroke: over the span where the envelope is on, with s its share (0 .. 1) of that span, the
+    speed is (1 - r) + 2 r cos(pi s) for the user's return r: the hand goes out, then comes back
+    until its net motion is 1 - r of the steady motion's (r = 1: it ends where it began)."""
+    if user.single_stroke:
+        on = np.flatnonzero(envelope > 1e-3)
+        if on.size < 2:
+            return envelope
+        s = np.clip((t - t[on[0]]) / (t[on[-1]] - t[on[0]]), 0.0, 1.0)
+        r = user.stroke_return
+        return envelope * ((1.0 - r) + 2.0 * r * np.cos(np.pi * s))
     if user.repeated:
         return envelope * (1.0 + user.stroke_amplitude * _stroke(2 * np.pi * user.stroke_freq_hz * t + phase0))
     return envelope

@@ -133,6 +133,9 @@ class UserProfile:
     tremor_freq_hz: np.ndarray  # (3,)
     handler_magnitude: np.ndarray  # (6,) nominal label magnitude per dimension
     mirrored: bool = False
+    single_stroke: bool = False  # each move or turn is one stroke, out and partly back
+    stroke_return: float = 0.0  # single stroke: how far back (0 one way .. 1 all the way)
+    stroke_speed_gain: float = 1.0  # single stroke: speed against the user's steady speed
 
     def describe(self) -> str:
         parts = [f"{DIMENSIONS[d]}+: {self.gestures[(d, 1)].describe()}" for d in range(6)]
@@ -165,7 +168,7 @@ def make_user(config: GeneratorConfig, user_id: str, group: str, rng: np.random.
                 pattern=str(extra) if kind == "sweep" else "",
             )
     rp = np.array([rng.uniform(*r) for r in config.rest_position_m])
-    return UserProfile(
+    user = UserProfile(
         user_id=user_id,
         group=group,
         gestures=gestures,
@@ -195,6 +198,12 @@ def make_user(config: GeneratorConfig, user_id: str, group: str, rng: np.random.
         ),
         mirrored=mirrored,
     )
+    # Drawn last, and only when some users stroke, so a population without them is drawn as before.
+    if config.p_single_stroke > 0.0 and rng.random() < config.p_single_stroke:
+        user.single_stroke = True
+        user.stroke_return = u(config.single_stroke_return)
+        user.stroke_speed_gain = u(config.single_stroke_speed_gain)
+    return user
 
 
 # --------------------------------------------------------------------------- population
