@@ -33,7 +33,7 @@ def no_network(monkeypatch):
 @pytest.fixture(scope="module")
 def landmarker():
     # MediaPipe's accuracy on a noiseless drawing: the scenario's light blur, meant for real footage's
-    # pixel noise (docs/camera.md), moves one drawn pose's landmarks from 12 to 22 px (median).
+    # pixel noise (docs/own_hand.md), moves one drawn pose's landmarks from 12 to 22 px (median).
     with HandLandmarker(Camera(blur_sigma_px=0.0), video=False) as lm:
         yield lm
 

@@ -105,8 +105,8 @@ class DiffIk:
     # LeastSquaresCost with the axis mask [0 0 0 1 1 1]): the first cost alone weighs an error of
     # 0.1 m/s like one of 0.1 rad/s, so a turn was tracked by swinging the part's centre aside (up
     # to 0.2 m/s). 24 x tracking_weight weighs 1 cm/s of the centre like 0.05 rad/s of turn. Chosen
-    # on development runs: 10,000 (100 x) left the QP trading the turn away instead (README,
-    # "Differential IK"). 0: none.
+    # on development runs: 10,000 (100 x) left the QP trading the turn away instead (docs/archive.md,
+    # "The linear tracking weight"). 0: none.
     linear_tracking_weight: float = 2400.0
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.

@@ -20,7 +20,7 @@ the gestures are. For a model with `read_skip` (the shipped one), mean - r is
 the correction of the decoder f_y, which was learned on other people and pulls
 a gesture toward what it means to them; w = 1 is the module's mean itself (the
 paper's CCHP), w = 0 the read alone (`policy.correction_weight` in the
-scenario; the README has what each does in the closed-loop task). The module
+scenario; docs/policy.md has what each does in the closed-loop task). The module
 is always fed its own mean, as in training, whatever w is.
 
 Input ports

@@ -99,7 +99,7 @@ class PersonConfig:
     # Where the part is shown (world). None: straight above where it was first seen, at the lift
     # height, so the turns start as soon as the lift ends. The earlier point nearer the glass,
     # (0.25, 0.15, 0.50), cost two translation strokes (about 9 s) before the first turn
-    # (README, "The inspection task").
+    # (docs/archive.md, "The presentation point and the intent reference on the earlier IK").
     presentation_xyz_W: tuple[float, float, float] | None = None
     presentation_tolerance_m: float = 0.07
     drift_tolerance_m: float = 0.12  # while inspecting, correct the position when further off
