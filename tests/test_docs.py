@@ -72,3 +72,14 @@ def test_every_command_shown_answers_help():
     with ThreadPoolExecutor(max_workers=2) as pool:
         failed = [(m, err) for m, answered, err in pool.map(run, _modules()) if not answered]
     assert not failed, failed
+
+
+def test_every_benchmark_is_cited_by_a_doc():
+    """benchmarks/ holds what the docs cite; a one-off study belongs in experiments/, with a row in its index."""
+    text = "\n".join(p.read_text() for p in DOCS)
+    uncited = [p.name for p in sorted((REPO / "benchmarks").iterdir())
+               if p.is_file() and f"benchmarks/{p.name}" not in text]
+    assert not uncited, uncited
+    index = (REPO / "experiments" / "README.md").read_text()
+    unlisted = [p.name for p in sorted((REPO / "experiments").glob("*.py")) if f"`{p.name}`" not in index]
+    assert not unlisted, unlisted
