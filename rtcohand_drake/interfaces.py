@@ -15,7 +15,7 @@ dimensions always in the order Tx, Ty, Tz, Rx, Ry, Rz.
 
 # The feature size is defined beside the features (hand_features, free of Drake, so the
 # learning code uses the same constant).
-from rtcohand_drake.data.hand_features import FEATURE_DIM  # noqa: E402,F401  (36) hand-part velocities
+from rtcohand_drake.data.hand_features import FEATURE_DIM  # noqa: F401  (36) hand-part velocities
 
 NUM_JOINTS = 7  # Gen3 7-DoF: Actuator1 ... Actuator7
 TWIST_DIM = 6  # [vx vy vz wx wy wz]

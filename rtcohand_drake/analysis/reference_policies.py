@@ -6,7 +6,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, INTENDED_TWIST, POLICY_MEAN, POLICY_STD,
-    RESUME_COUNT, SCALAR_DIM, TWIST_DIM)
+                                       RESUME_COUNT, SCALAR_DIM, TWIST_DIM)
 
 
 class IntentPolicy(LeafSystem):

@@ -54,7 +54,7 @@ from rtcohand_drake.stations.kortex_session import (
 )
 from rtcohand_drake.cell.plant import add_cell_models, exclude_arm_self_collisions, pose_vector
 from rtcohand_drake.interfaces import (POSE_DIM, POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT,
-    VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
+                                       VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
 
 class KortexArmInterface(LeafSystem):
     """The arm as a discrete system: reads feedback and sends joint speeds every period.

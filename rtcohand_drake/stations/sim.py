@@ -42,7 +42,7 @@ from pydrake.systems.primitives import Demultiplexer
 from rtcohand_drake.cell.plant import add_cell_models, exclude_arm_self_collisions, pose_vector, GEN3_JOINTS
 from rtcohand_drake.scenario import Scenario
 from rtcohand_drake.interfaces import (POSE_DIM, POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT,
-    VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
+                                       VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
 
 class VelocityServo(LeafSystem):
     """Integrates a joint velocity command into the PD servo's desired state.

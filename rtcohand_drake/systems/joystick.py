@@ -43,7 +43,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from rtcohand_drake.interfaces import (GESTURE_STATUS, GESTURE_STATUS_DIM, INTENDED_TWIST, SCALAR_DIM, TWIST_DIM,
-    TWIST_REQUEST, WORKPIECE_POSE)
+                                       TWIST_REQUEST, WORKPIECE_POSE)
 
 JOYSTICK_MODE = "joystick_mode"
 TRANSLATION, ROTATION = 0, 1

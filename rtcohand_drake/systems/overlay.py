@@ -31,7 +31,8 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from rtcohand_drake.cell.faces import COLOUR_RGBA, FACES, face_key
 from rtcohand_drake.interfaces import (FACES_INSPECTED, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS, KEYPOINTS_DIM,
-    POLICY_STD, POSE_DIM, SAFETY_STATUS, SAFETY_STATUS_DIM, TWIST_COMMAND, TWIST_DIM, WORKPIECE_POSE)
+                                       POLICY_STD, POSE_DIM, SAFETY_STATUS, SAFETY_STATUS_DIM, TWIST_COMMAND,
+                                       TWIST_DIM, WORKPIECE_POSE)
 from rtcohand_drake.systems.safety.rules import Intervention
 from rtcohand_drake.systems.safety.supervisor import Mode
 

@@ -47,7 +47,7 @@ from pydrake.systems.framework import LeafSystem
 from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.learning.policy_file import load_policy
 from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD,
-    READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
+                                       READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
 
 
 @dc.dataclass

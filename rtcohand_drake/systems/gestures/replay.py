@@ -11,7 +11,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS,
-    KEYPOINTS_DIM)
+                                       KEYPOINTS_DIM)
 from rtcohand_drake.systems.gestures.base import NAN_HAND
 
 

@@ -52,8 +52,9 @@ from rtcohand_drake.cell.layout import Box
 from rtcohand_drake.systems.safety.config import Safety
 from rtcohand_drake.systems.safety.rules import Intervention, Mode, Zones, confidence_scale, limit_to_zones, plausible_features
 from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, OPERATOR,
-    OPERATOR_DIM, POSE_DIM, READ_VARIANCE, RESUME_COUNT, SAFETY_STATUS, SAFETY_STATUS_DIM, SCALAR_DIM, SPEED_SCALE,
-    TWIST_COMMAND, TWIST_DIM, TWIST_REQUEST, WORKPIECE_POSE)
+                                       OPERATOR_DIM, POSE_DIM, READ_VARIANCE, RESUME_COUNT, SAFETY_STATUS,
+                                       SAFETY_STATUS_DIM, SCALAR_DIM, SPEED_SCALE, TWIST_COMMAND, TWIST_DIM,
+                                       TWIST_REQUEST, WORKPIECE_POSE)
 
 
 class SafetySupervisor(LeafSystem):
