@@ -94,7 +94,7 @@ TRAIN = [
 Generate a small population of simulated users, train CCHP for a few
 hundred steps, evaluate it on the paper's six settings, and export it as the
 TorchScript policy the diagram loads. The full runs are documented commands in
-the README; this is the same code at toy scale."""),
+docs/policy.md; this is the same code at toy scale."""),
     new_code_cell(SHORT + '''
 import json, subprocess, sys, tempfile
 from pathlib import Path

@@ -13,11 +13,15 @@ dimensions always in the order Tx, Ty, Tz, Rx, Ry, Rz.
 
 # --- sizes ---------------------------------------------------------------------
 
+# The feature size is defined beside the features (hand_features, free of Drake, so the
+# learning code uses the same constant).
+from rtcohand_drake.data.hand_features import FEATURE_DIM  # noqa: F401  (36) hand-part velocities
+
 NUM_JOINTS = 7  # Gen3 7-DoF: Actuator1 ... Actuator7
-FEATURE_DIM = 36  # hand-part velocities: 6 parts x (3 linear + 3 angular)
 TWIST_DIM = 6  # [vx vy vz wx wy wz]
 POSE_DIM = 7  # [x y z qw qx qy qz]
 KEYPOINTS_DIM = 63  # 21 hand keypoints x 3, row-major
+SCALAR_DIM = 1  # a one-entry port: a count, a factor or a mode
 
 # --- the station (simulated and Kortex: exactly the same port set) -------------
 
@@ -58,6 +62,7 @@ TWIST_REQUEST = "twist_request"  # (6) filtered twist, to the supervisor
 OPERATOR = "operator"  # (2) [pause (0/1), sensitivity factor], from the operator panel
 OPERATOR_DIM = 2
 HAND_SIGN = "hand_sign"  # (3) [toggled (0/1), openness, toggles], from the pause hand sign
+HAND_SIGN_DIM = 3
 TWIST_COMMAND = "twist_command"  # (6) the supervisor's command, to the differential IK
 SAFETY_STATUS = "safety_status"  # (3) [mode, resume_count, interventions]
 SAFETY_STATUS_DIM = 3

@@ -1,6 +1,6 @@
 """`python -m rtcohand_drake.run`: build the diagram for a scenario, simulate it, log it.
 
-    python -m rtcohand_drake.run --scenario inspection        # a built-in name, or a path to a scenario YAML file
+    python -m rtcohand_drake.run [--scenario NAME | PATH.yaml]   # default: the built-in inspection
         [--duration S] [--realtime-rate R] [--no-meshcat | --no-wait] [--seed N]
         [--gesture-source synthetic|replay|camera|scripted|joystick]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]

@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rtcohand_drake.data.dataset import give_usual_mode
 from rtcohand_drake.errors import InputError
 
 RUNLOG_FORMAT = "rtcohand-runlog"
@@ -105,6 +106,7 @@ def write_run_log(path: str | Path, log: RunLog) -> Path:
                 f.create_dataset(name, data=np.asarray(getattr(log, field), dtype=np.float64))
             events = np.array([(e.time, e.kind, e.detail) for e in log.events], dtype=_EVENT_DTYPE)
             f.create_dataset("events", data=events, dtype=_EVENT_DTYPE)
+        give_usual_mode(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -4,6 +4,7 @@ The drawn hand (`rtcohand_drake.vision.drawn_hand`) is the offline test image:
 its keypoints are known, so the tracker's landmarks can be checked against them.
 """
 
+import math
 import socket
 
 import h5py
@@ -32,7 +33,7 @@ def no_network(monkeypatch):
 @pytest.fixture(scope="module")
 def landmarker():
     # MediaPipe's accuracy on a noiseless drawing: the scenario's light blur, meant for real footage's
-    # pixel noise (docs/camera.md), moves one drawn pose's landmarks from 12 to 22 px (median).
+    # pixel noise (docs/own_hand.md), moves one drawn pose's landmarks from 12 to 22 px (median).
     with HandLandmarker(Camera(blur_sigma_px=0.0), video=False) as lm:
         yield lm
 
@@ -232,25 +233,43 @@ def test_live_tracker_thread_stamps_frames_and_freezes_at_the_end(tmp_path):
     frames = [f for f, _ in drawn_hand_frames(CALIBRATION, [("wave", 0.5)])]
     path = tmp_path / "live.avi"
     write_video(path, frames + [frames[-1]] * 15)  # then the same image again: a frozen camera
+    started = time.monotonic()
     tracker = LiveCameraTracker(path, HandPipeline(CALIBRATION))
     try:
         first = tracker.latest(10.0)  # ties the tracker's clock to the diagram's time 10 s
+        tied = time.monotonic()
         deadline = time.monotonic() + 30.0
-        seen = set()
+        seen, shapes = [], set()
         while not tracker.closed and time.monotonic() < deadline:
             keypoints, t = tracker.latest(10.0)
             if keypoints is not None:
-                seen.add(t)
+                shapes.add(keypoints.shape)
+                if not seen or t != seen[-1]:
+                    seen.append(t)
             time.sleep(0.005)
+        ended = time.monotonic()
         assert tracker.closed
-        assert len(seen) >= 3 and all(9.0 < t < 40.0 for t in seen)
+        # A frame is stamped when it is read: after the tracker started, before the loop ended,
+        # on the diagram's clock (10 s when it was tied, advancing with the wall clock).
+        earliest, latest = 10.0 - (tied - started), 10.0 + (ended - started)
+        assert len(seen) >= 3 and seen == sorted(seen), seen
+        assert all(earliest <= t <= latest for t in seen), (earliest, seen, latest)
+        assert shapes == {(21, 3)}
         keypoints, t_end = tracker.latest(10.0)
         assert keypoints is None and t_end == tracker.latest(11.0)[1]  # closed: no new frame time
+        assert t_end >= seen[-1]  # the last distinct frame, with a hand in it or not
         # The repeated images were not new frames: the last stamp is that of the last distinct one.
         assert len(tracker._pipeline.processing_s) == len(frames)
     finally:
         tracker.close()
-    assert first[0] is None or first[0].shape == (21, 3)
+    # At the first call either nothing had been read yet (no time at all) or a frame had, read
+    # after the tracker started and before that call.
+    first_keypoints, first_t = first
+    if first_t == -math.inf:
+        assert first_keypoints is None
+    else:
+        assert earliest <= first_t <= 10.0
+        assert first_keypoints is None or first_keypoints.shape == (21, 3)
 
 
 def test_bad_model_file_is_one_line(tmp_path):

@@ -234,3 +234,36 @@ def test_missing_motions_names_what_a_context_holds_no_example_of():
     # Labels all zero (or not finite): every motion is missing.
     still = [(np.zeros((20, 36)), np.full((20, 6), np.nan))]
     assert len(missing_motions(still)) == 12
+
+
+def test_dataset_and_run_log_get_the_usual_mode(tmp_path, clips):
+    """Both atomic writers give their file 0666 less the umask, not mkstemp's private 0600."""
+    import os
+    import stat
+
+    from rtcohand_drake.run_log import RunLog, write_run_log
+
+    old = os.umask(0o022)
+    try:
+        write_dataset(tmp_path / "data.h5", clips[:2])
+        write_run_log(tmp_path / "run.h5", RunLog(scenario="inspection"))
+    finally:
+        os.umask(old)
+    for name in ("data.h5", "run.h5"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o644, name
+
+
+def test_context_user_error_says_the_list_of_users_is_cut(tmp_path):
+    from rtcohand_drake.data.dataset import context_pieces
+    from rtcohand_drake.errors import InputError
+
+    many = generate_population(GeneratorConfig(), n_users=12, seed=3)
+    path = tmp_path / "many.h5"
+    first = {}
+    for clip in many:  # two clips of each person are enough
+        first.setdefault(clip.user, []).append(clip)
+    write_dataset(path, [c for person in first.values() for c in person[:2]])
+    with pytest.raises(InputError, match=r"holds 12 users.*, \.\.\. and 4 more\)$"):
+        context_pieces(path, None, 10.0)
+    with pytest.raises(InputError, match=r"has no labelled clips.*\(users: .*, \.\.\. and 4 more\)$"):
+        context_pieces(path, "nobody", 10.0)

@@ -1,7 +1,7 @@
 """The hand held steady in depth (`rtcohand_drake.vision.hand_pose_filter`), on drawn hands and written keypoints.
 
 Real footage shows MediaPipe's metric palm varying by 2-18 % (one sigma) from frame
-to frame (docs/camera.md); a per-frame fit turns that into depth. Here the
+to frame (docs/own_hand.md); a per-frame fit turns that into depth. Here the
 noise is put in on purpose, at 10 %, and the filter must take it out without
 holding back a real move in depth by more than 50 ms at the policy's 10 Hz.
 """

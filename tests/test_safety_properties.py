@@ -111,6 +111,7 @@ def make_stream(segments, seed):
 def harness():
     """{seated: (scenario, run, source, operator)}: the part lifted into free space, or in its mold."""
     seated = load_scenario("inspection")
+    model = policy_file(seated)  # before the lift: a missing file fails at once
     seated.safety.min_inspector_distance_m = 0.55
     scenario = load_scenario("inspection")
     scenario.safety.min_inspector_distance_m = 0.55
@@ -121,18 +122,23 @@ def harness():
     q_free = lift.station.GetOutputPort(POSITION_MEASURED).Eval(
         lift.station.GetMyContextFromRoot(sim.get_context())).copy()
     scenario.robot.q0_rad = list(q_free)
-    return {False: _harness(scenario), True: _harness(seated)}
+    return {False: _harness(scenario, model), True: _harness(seated, model)}
 
 
-def _harness(scenario):
+def policy_file(scenario):
+    """The policy put through the properties: RTCOHAND_PROPERTY_MODEL=path.pt, else the scenario's."""
     from pathlib import Path
 
     from rtcohand_drake.cell.robot_files import models_dir
 
-    # Any exported policy can be put through the same properties: RTCOHAND_PROPERTY_MODEL=path.pt.
     model = Path(os.environ.get("RTCOHAND_PROPERTY_MODEL", models_dir() / scenario.policy.model))
-    if not Path(model).is_file():
-        pytest.skip(f"{model} is not built yet")
+    # A missing file fails the test: a skip would report a soak that checked nothing as passed.
+    if not model.is_file():
+        pytest.fail(f"{model}: no such policy file (RTCOHAND_PROPERTY_MODEL or the scenario's policy.model)")
+    return model
+
+
+def _harness(scenario, model):
     source = StreamGestureSource()
     operator = SettableOperator()
     context_rng = np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""benchmarks/sweep_decodability.py: the feature sets it compares see what they are meant to."""
+"""experiments/sweep_decodability.py: the feature sets it compares see what they are meant to."""
 
 import importlib.util
 import pathlib
@@ -8,7 +8,7 @@ import numpy as np
 from rtcohand_drake.data.hand_features import hand_features
 from rtcohand_drake.data.population.hand_model import hand_keypoints_local
 
-SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "sweep_decodability.py"
+SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "sweep_decodability.py"
 
 
 def _script():

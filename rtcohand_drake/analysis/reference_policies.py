@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from rtcohand_drake.interfaces import GESTURE_FEATURES, INTENDED_TWIST, POLICY_MEAN, POLICY_STD, RESUME_COUNT
+from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, INTENDED_TWIST, POLICY_MEAN, POLICY_STD,
+                                       RESUME_COUNT, SCALAR_DIM, TWIST_DIM)
 
 
 class IntentPolicy(LeafSystem):
@@ -22,13 +23,13 @@ class IntentPolicy(LeafSystem):
         super().__init__()
         period = 1.0 / rate_hz
         self._lag = max(0, int(round(delay_s / period)))
-        self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
-        self.DeclareVectorInputPort(RESUME_COUNT, 1)
-        self._intent = self.DeclareVectorInputPort(INTENDED_TWIST, 6)
+        self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
+        self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
+        self._intent = self.DeclareVectorInputPort(INTENDED_TWIST, TWIST_DIM)
         self._buffer = self.DeclareDiscreteState(np.zeros(6 * (self._lag + 1)))  # newest last
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        self.DeclareVectorOutputPort(POLICY_MEAN, 6, self._calc_mean, prerequisites_of_calc={self.xd_ticket()})
-        self.DeclareVectorOutputPort(POLICY_STD, 6, lambda context, out: out.SetFromVector(np.zeros(6)))
+        self.DeclareVectorOutputPort(POLICY_MEAN, TWIST_DIM, self._calc_mean, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(POLICY_STD, TWIST_DIM, lambda context, out: out.SetFromVector(np.zeros(6)))
 
     def _update(self, context, discrete_state):
         buffer = context.get_discrete_state(self._buffer).get_value()

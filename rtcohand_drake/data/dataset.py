@@ -152,14 +152,22 @@ def write_dataset(path: str | os.PathLike, clips: Iterable[Clip], generator: str
                     cg.create_dataset("object_pose", data=np.asarray(clip.object_pose, dtype=np.float32))
                 if clip.timestamps is not None:
                     cg.create_dataset("timestamps", data=np.asarray(clip.timestamps, dtype=np.float64))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; give it the usual mode
+        give_usual_mode(tmp)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def give_usual_mode(path) -> None:
+    """Gives a file the mode a plain open() would (0666 less the umask).
+
+    The atomic writers start from `tempfile.mkstemp`, which makes the file private (0600);
+    renamed into place as it is, a dataset or run log could not be read by another user."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
 
 
 def _check_clip_for_writing(path: Path, clip: Clip) -> None:
@@ -409,6 +417,12 @@ def missing_motions(pieces, share: float = 0.25, min_steps: int = 3) -> list[str
     return missing
 
 
+def _some(names: list[str], shown: int = 8) -> str:
+    """The first `shown` names, and how many more there are, for a one-line error."""
+    more = f", ... and {len(names) - shown} more" if len(names) > shown else ""
+    return ", ".join(names[:shown]) + more
+
+
 def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
     """A user's own labelled clips from a dataset file, as (features, labels) pieces, and the user.
 
@@ -421,9 +435,9 @@ def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
     if user is None:
         if len(users) > 1:
             raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user "
-                             f"({', '.join(users[:8])}{', ...' if len(users) > 8 else ''})")
+                             f"({_some(users)})")
         user = users[0]
     pieces = [(c.features, c.labels) for c in clips if c.user == user and c.name not in exclude]
     if not pieces:
-        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {', '.join(users[:8])})")
+        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {_some(users)})")
     return pieces, user

@@ -84,7 +84,9 @@ from __future__ import annotations
 import numpy as np
 
 PARTS = ("palm", "thumb", "index", "middle", "ring", "pinky")
-FEATURE_DIM = 36
+PART_DIM = 6  # a part's linear and angular velocity
+# The one definition of the feature size: the ports, the networks and the references import it.
+FEATURE_DIM = len(PARTS) * PART_DIM
 NUM_KEYPOINTS = 21
 
 # Keypoint chains (base .. tip) of the five fingers, in PARTS order after the palm.

@@ -19,7 +19,6 @@ from rtcohand_drake.data.hand_features import FINGER_CHAINS, PARTS
 BONES = [(0, int(c[0])) for c in FINGER_CHAINS] + [
     (int(c[i]), int(c[i + 1])) for c in FINGER_CHAINS for i in range(3)
 ] + [(5, 9), (9, 13), (13, 17)]
-PART_COLOURS = ("black", "tab:orange", "tab:blue", "tab:green", "tab:red", "tab:purple")
 DIM_COLOURS = ("tab:red", "tab:green", "tab:blue", "tab:red", "tab:green", "tab:blue")
 
 

@@ -19,7 +19,8 @@ from typing import Sequence
 
 import numpy as np
 
-FEATURE_DIM = 36
+from rtcohand_drake.data.hand_features import FEATURE_DIM
+
 MOTION_DIM = 6
 
 

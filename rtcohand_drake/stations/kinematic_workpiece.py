@@ -11,7 +11,7 @@ from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.cell.geometry import matrix_to_quaternion, quaternion_to_matrix
 from rtcohand_drake.data.population import rotation_matrices
-from rtcohand_drake.interfaces import WORKPIECE_POSE
+from rtcohand_drake.interfaces import TWIST_DIM, WORKPIECE_POSE
 
 
 class KinematicWorkpiece(LeafSystem):
@@ -24,7 +24,7 @@ class KinematicWorkpiece(LeafSystem):
         super().__init__()
         self._R_WU = X_WU.rotation().matrix()
         self._dt = period_s
-        self._twist = self.DeclareVectorInputPort("twist", 6)
+        self._twist = self.DeclareVectorInputPort("twist", TWIST_DIM)
         self._pose = self.DeclareDiscreteState(np.asarray(initial_pose_W, float))
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, 0.0, self._update)
         self.DeclareStateOutputPort(WORKPIECE_POSE, self._pose)

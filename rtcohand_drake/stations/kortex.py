@@ -53,7 +53,8 @@ from rtcohand_drake.stations.kortex_session import (
     rad_s_to_deg_s,
 )
 from rtcohand_drake.cell.plant import add_cell_models, exclude_arm_self_collisions, pose_vector
-from rtcohand_drake.interfaces import POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import (POSE_DIM, POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT,
+                                       VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
 
 class KortexArmInterface(LeafSystem):
     """The arm as a discrete system: reads feedback and sends joint speeds every period.
@@ -138,7 +139,7 @@ class BodyPoseFromPositions(LeafSystem):
         self._plant_context = plant.CreateDefaultContext()
         self._frame = plant.GetBodyByName(body_name, model_instance).body_frame()
         self._q = self.DeclareVectorInputPort("positions", plant.num_positions())
-        self.DeclareVectorOutputPort("pose", 7, self._calc)
+        self.DeclareVectorOutputPort("pose", POSE_DIM, self._calc)
 
     def _calc(self, context, output: BasicVector):
         self._plant.SetPositions(self._plant_context, self._q.Eval(context))

@@ -41,7 +41,8 @@ from pydrake.systems.primitives import Demultiplexer
 
 from rtcohand_drake.cell.plant import add_cell_models, exclude_arm_self_collisions, pose_vector, GEN3_JOINTS
 from rtcohand_drake.scenario import Scenario
-from rtcohand_drake.interfaces import POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT, VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import (POSE_DIM, POSITION_COMMANDED, POSITION_MEASURED, QUERY_OBJECT,
+                                       VELOCITY_COMMAND, VELOCITY_ESTIMATED, WORKPIECE_POSE)
 
 class VelocityServo(LeafSystem):
     """Integrates a joint velocity command into the PD servo's desired state.
@@ -92,7 +93,7 @@ class BodyPoseVector(LeafSystem):
         super().__init__()
         self._index = int(plant.GetBodyByName(body_name, model_instance).index())
         self._poses = self.DeclareAbstractInputPort("body_poses", plant.get_body_poses_output_port().Allocate())
-        self.DeclareVectorOutputPort("pose", 7, self._calc)
+        self.DeclareVectorOutputPort("pose", POSE_DIM, self._calc)
 
     def _calc(self, context, output: BasicVector):
         output.SetFromVector(pose_vector(self._poses.Eval(context)[self._index]))
@@ -155,9 +156,3 @@ def make_sim_station(scenario: Scenario, name: str = "gen3_station") -> Diagram:
     diagram = builder.Build()
     diagram.set_name(name)
     return diagram
-
-
-def station_plant(station: Diagram) -> MultibodyPlant:
-    return station.GetSubsystemByName("plant")
-
-

@@ -78,7 +78,7 @@ from pydrake.systems.framework import BusValue, LeafSystem
 
 from rtcohand_drake.cell.layout import Cell
 from rtcohand_drake.cell.plant import add_cell_models, make_control_plant
-from rtcohand_drake.interfaces import FOLLOW_STATUS, POSITION_MEASURED, TWIST_COMMAND, VELOCITY_COMMAND
+from rtcohand_drake.interfaces import FOLLOW_STATUS, POSITION_MEASURED, TWIST_COMMAND, TWIST_DIM, VELOCITY_COMMAND
 
 
 @dc.dataclass
@@ -105,8 +105,8 @@ class DiffIk:
     # LeastSquaresCost with the axis mask [0 0 0 1 1 1]): the first cost alone weighs an error of
     # 0.1 m/s like one of 0.1 rad/s, so a turn was tracked by swinging the part's centre aside (up
     # to 0.2 m/s). 24 x tracking_weight weighs 1 cm/s of the centre like 0.05 rad/s of turn. Chosen
-    # on development runs: 10,000 (100 x) left the QP trading the turn away instead (README,
-    # "Differential IK"). 0: none.
+    # on development runs: 10,000 (100 x) left the QP trading the turn away instead (docs/archive.md,
+    # "The linear tracking weight"). 0: none.
     linear_tracking_weight: float = 2400.0
     joint_centering_gain: float = 0.5
     # Below this ratio of achieved to commanded twist the controller reports that it cannot follow.
@@ -146,6 +146,10 @@ STUCK_RATIO = 1e-2
 # A collision row counts as binding within this rate of its bound (m/s).
 BINDING_ROW_TOLERANCE_M_S = 1e-3
 ROBOT_MODELS = ("gen3", "gripper", "workpiece")
+# The checker requires an edge step (rad, the spacing of configurations checked along a path
+# between two postures); the controller only asks for the clearance at one posture each
+# period, never along a path, so the value does not change what the controller does.
+CHECKER_EDGE_STEP_RAD = 0.05
 
 
 def unrequested_motion(V_achieved: np.ndarray, V_desired: np.ndarray) -> tuple[float, float]:
@@ -238,7 +242,7 @@ def make_collision_checker(cell: Cell) -> tuple[SceneGraphCollisionChecker, obje
     plant.Finalize()
     robot = [instances[name] for name in ROBOT_MODELS]
     checker = SceneGraphCollisionChecker(
-        model=builder.Build(), robot_model_instances=robot, edge_step_size=0.05,
+        model=builder.Build(), robot_model_instances=robot, edge_step_size=CHECKER_EDGE_STEP_RAD,
         env_collision_padding=0.0, self_collision_padding=0.0, implicit_context_parallelism=Parallelism(False))
     bodies = [plant.get_body(i) for r in robot for i in plant.GetBodyIndices(r)]
     for k, a in enumerate(bodies):
@@ -309,7 +313,7 @@ class TwistToJointVelocity(LeafSystem):
             time_step=cfg.clearance_approach_time_s, K_VX=1.0, Vd_TG_limit=SpatialVelocity(V_limit))
         self._system_context = self._system.CreateDefaultContext()
 
-        self._twist = self.DeclareVectorInputPort(TWIST_COMMAND, 6)
+        self._twist = self.DeclareVectorInputPort(TWIST_COMMAND, TWIST_DIM)
         self._q = self.DeclareVectorInputPort(POSITION_MEASURED, n)
         self._v_state = self.DeclareDiscreteState(n)
         self._status_state = self.DeclareDiscreteState(np.array([0.0, 1.0]))

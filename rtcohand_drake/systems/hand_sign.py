@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from rtcohand_drake.interfaces import HAND_SIGN, KEYPOINTS, OPERATOR
+from rtcohand_drake.interfaces import HAND_SIGN, HAND_SIGN_DIM, KEYPOINTS, KEYPOINTS_DIM, OPERATOR, OPERATOR_DIM
 from rtcohand_drake.systems.hand_sign_config import HandSign
 
 TIPS, KNUCKLES, WRIST = [8, 12, 16, 20], [5, 9, 13, 17], 0
@@ -103,13 +103,13 @@ class PauseHandSign(LeafSystem):
         super().__init__()
         self._config = config
         self.period_s = config.period_s
-        self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, 63)
-        self._panel = self.DeclareVectorInputPort(OPERATOR, 2)
+        self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
+        self._panel = self.DeclareVectorInputPort(OPERATOR, OPERATOR_DIM)
         self._state = self.DeclareDiscreteState(initial_state())
         self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, 0.0, self._update)
-        self.DeclareVectorOutputPort(OPERATOR, 2, self._calc_operator,
+        self.DeclareVectorOutputPort(OPERATOR, OPERATOR_DIM, self._calc_operator,
                                      prerequisites_of_calc={self.xd_ticket(), self._panel.ticket()})
-        self.DeclareVectorOutputPort(HAND_SIGN, 3, self._calc_sign, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(HAND_SIGN, HAND_SIGN_DIM, self._calc_sign, prerequisites_of_calc={self.xd_ticket()})
 
     def _update(self, context, discrete_state):
         state = context.get_discrete_state(self._state).get_value()

@@ -20,7 +20,7 @@ from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.analysis.inspection import advance_holds, face_angles_deg, MAX_ANGLE_DEG
 from rtcohand_drake.cell.faces import FACES
-from rtcohand_drake.interfaces import FACES_INSPECTED, WORKPIECE_POSE
+from rtcohand_drake.interfaces import FACES_INSPECTED, POSE_DIM, WORKPIECE_POSE
 
 
 class InspectionMonitor(LeafSystem):
@@ -28,7 +28,7 @@ class InspectionMonitor(LeafSystem):
         super().__init__()
         self._eye = np.asarray(eye_W, float)
         n = len(FACES)
-        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
+        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, POSE_DIM)
         # [view start (n), hold completed at (n)], NaN when not.
         self._holds = self.DeclareDiscreteState(np.full(2 * n, np.nan))
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, 0.0, self._update)

@@ -42,7 +42,8 @@ import dataclasses as dc
 import numpy as np
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
-from rtcohand_drake.interfaces import GESTURE_STATUS, INTENDED_TWIST, TWIST_REQUEST, WORKPIECE_POSE
+from rtcohand_drake.interfaces import (GESTURE_STATUS, GESTURE_STATUS_DIM, INTENDED_TWIST, SCALAR_DIM, TWIST_DIM,
+                                       TWIST_REQUEST, WORKPIECE_POSE)
 
 JOYSTICK_MODE = "joystick_mode"
 TRANSLATION, ROTATION = 0, 1
@@ -83,14 +84,14 @@ class JoystickMapper(LeafSystem):
     def __init__(self, config: Joystick):
         super().__init__()
         self._cfg = config
-        self._intent = self.DeclareVectorInputPort(INTENDED_TWIST, 6)
+        self._intent = self.DeclareVectorInputPort(INTENDED_TWIST, TWIST_DIM)
         # [mode, toggle done at (s), twist (6)]
         self._state = self.DeclareDiscreteState(np.concatenate([[TRANSLATION, -np.inf], np.zeros(6)]))
         self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, 0.0, self._update)
-        self.DeclareVectorOutputPort(TWIST_REQUEST, 6, self._calc_twist, prerequisites_of_calc={self.xd_ticket()})
-        self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._calc_status,
+        self.DeclareVectorOutputPort(TWIST_REQUEST, TWIST_DIM, self._calc_twist, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(GESTURE_STATUS, GESTURE_STATUS_DIM, self._calc_status,
                                      prerequisites_of_calc={self.time_ticket()})
-        self.DeclareVectorOutputPort(JOYSTICK_MODE, 1, self._calc_mode, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(JOYSTICK_MODE, SCALAR_DIM, self._calc_mode, prerequisites_of_calc={self.xd_ticket()})
 
     def _update(self, context, discrete_state):
         t = context.get_time()

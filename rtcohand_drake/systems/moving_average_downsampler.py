@@ -33,7 +33,7 @@ import dataclasses as dc
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from rtcohand_drake.interfaces import POLICY_MEAN, RESUME_COUNT, TWIST_REQUEST
+from rtcohand_drake.interfaces import POLICY_MEAN, RESUME_COUNT, SCALAR_DIM, TWIST_DIM, TWIST_REQUEST
 
 
 @dc.dataclass
@@ -77,8 +77,8 @@ class MovingAverageDownsampler(LeafSystem):
         self._clamp = np.asarray(config.clamp, float)
         self._deadband = np.asarray(config.deadband, float)
         self._n = config.window if config.mode == "paper" else config.responsive_window
-        self._in = self.DeclareVectorInputPort(POLICY_MEAN, 6)
-        self._resume = self.DeclareVectorInputPort(RESUME_COUNT, 1)
+        self._in = self.DeclareVectorInputPort(POLICY_MEAN, TWIST_DIM)
+        self._resume = self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
         # History ring buffer (n x 6, row-major), number of samples held, next slot.
         self._history = self.DeclareDiscreteState(np.zeros(self._n * 6))
         self._meta = self.DeclareDiscreteState(np.array([0.0, 0.0, 0.0]))  # [count, head, last resume_count]

@@ -18,7 +18,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.systems.safety.config import Safety
-from rtcohand_drake.interfaces import OPERATOR
+from rtcohand_drake.interfaces import OPERATOR, OPERATOR_DIM
 
 PAUSE_BUTTON = "Pause / Resume (space)"
 SENSITIVITY_SLIDER = "Sensitivity"
@@ -33,7 +33,7 @@ class MeshcatOperatorPanel(LeafSystem):
                           safety.sensitivity_default)
         self._state = self.DeclareDiscreteState(np.array([0.0, safety.sensitivity_default, 0.0]))
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, 0.0, self._poll)
-        self.DeclareVectorOutputPort(OPERATOR, 2, self._calc, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(OPERATOR, OPERATOR_DIM, self._calc, prerequisites_of_calc={self.xd_ticket()})
 
     def _poll(self, context, discrete_state):
         paused, _, clicks_seen = context.get_discrete_state(self._state).get_value()
@@ -56,7 +56,7 @@ class ScheduledOperatorPanel(LeafSystem):
         super().__init__()
         self._pauses = [(float(a), float(b)) for a, b in pauses]
         self._sensitivity = float(sensitivity)
-        self.DeclareVectorOutputPort(OPERATOR, 2, self._calc)
+        self.DeclareVectorOutputPort(OPERATOR, OPERATOR_DIM, self._calc)
 
     def _calc(self, context, output: BasicVector):
         t = context.get_time()

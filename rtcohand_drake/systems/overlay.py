@@ -30,8 +30,9 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import EventStatus, LeafSystem
 
 from rtcohand_drake.cell.faces import COLOUR_RGBA, FACES, face_key
-from rtcohand_drake.interfaces import (FACES_INSPECTED, GESTURE_STATUS, KEYPOINTS, POLICY_STD, SAFETY_STATUS,
-                                       TWIST_COMMAND, WORKPIECE_POSE)
+from rtcohand_drake.interfaces import (FACES_INSPECTED, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS, KEYPOINTS_DIM,
+                                       POLICY_STD, POSE_DIM, SAFETY_STATUS, SAFETY_STATUS_DIM, TWIST_COMMAND,
+                                       TWIST_DIM, WORKPIECE_POSE)
 from rtcohand_drake.systems.safety.rules import Intervention
 from rtcohand_drake.systems.safety.supervisor import Mode
 
@@ -82,12 +83,12 @@ class RunOverlay(LeafSystem):
         self._anchor_U = np.asarray(hand_anchor_U, float)
         self._hand_offset = None  # set from the first skeleton seen, so the hand sits at the anchor
         self._scales = {"linear": linear_scale, "angular": angular_scale}
-        self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, 63)
-        self._twist = self.DeclareVectorInputPort(TWIST_COMMAND, 6)
-        self._status = self.DeclareVectorInputPort(SAFETY_STATUS, 3)
-        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
-        self._gesture = self.DeclareVectorInputPort(GESTURE_STATUS, 2)
-        self._std = self.DeclareVectorInputPort(POLICY_STD, 6)
+        self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
+        self._twist = self.DeclareVectorInputPort(TWIST_COMMAND, TWIST_DIM)
+        self._status = self.DeclareVectorInputPort(SAFETY_STATUS, SAFETY_STATUS_DIM)
+        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, POSE_DIM)
+        self._gesture = self.DeclareVectorInputPort(GESTURE_STATUS, GESTURE_STATUS_DIM)
+        self._std = self.DeclareVectorInputPort(POLICY_STD, TWIST_DIM)
         self._faces = self.DeclareVectorInputPort(FACES_INSPECTED, len(FACES))
         for i in range(21):
             meshcat.SetObject(f"{PREFIX}/hand/joint{i}", Sphere(0.008 if i else 0.012), Rgba(0.95, 0.75, 0.6, 1))

@@ -20,7 +20,7 @@ the gestures are. For a model with `read_skip` (the shipped one), mean - r is
 the correction of the decoder f_y, which was learned on other people and pulls
 a gesture toward what it means to them; w = 1 is the module's mean itself (the
 paper's CCHP), w = 0 the read alone (`policy.correction_weight` in the
-scenario; the README has what each does in the closed-loop task). The module
+scenario; docs/policy.md has what each does in the closed-loop task). The module
 is always fed its own mean, as in training, whatever w is.
 
 Input ports
@@ -46,7 +46,8 @@ from pydrake.systems.framework import LeafSystem
 
 from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.learning.policy_file import load_policy
-from rtcohand_drake.interfaces import ATTENTION, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD, READ_VARIANCE, RESUME_COUNT
+from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD,
+                                       READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
 
 
 @dc.dataclass
@@ -111,8 +112,8 @@ class CchpPolicy(LeafSystem):
         for _ in range(3):
             self.step(np.zeros(36), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
 
-        self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
-        self._resume = self.DeclareVectorInputPort(RESUME_COUNT, 1)
+        self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
+        self._resume = self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
         self._h = self.DeclareDiscreteState(H)
         self._c = self.DeclareDiscreteState(H)
         self._y = self.DeclareDiscreteState(6)  # the module's own mean, fed back

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from rtcohand_drake.interfaces import GESTURE_STATUS, TWIST_REQUEST
+from rtcohand_drake.interfaces import GESTURE_STATUS, GESTURE_STATUS_DIM, TWIST_DIM, TWIST_REQUEST
 
 
 @dc.dataclass
@@ -34,8 +34,8 @@ class ScriptedTwist(LeafSystem):
         self._starts = np.cumsum([0.0] + [s.duration_s for s in segments])
         self._twists = np.array([s.twist for s in segments], dtype=float).reshape(-1, 6)
         self._ramp = ramp_s
-        self.DeclareVectorOutputPort(TWIST_REQUEST, 6, self._calc)
-        self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._calc_status)
+        self.DeclareVectorOutputPort(TWIST_REQUEST, TWIST_DIM, self._calc)
+        self.DeclareVectorOutputPort(GESTURE_STATUS, GESTURE_STATUS_DIM, self._calc_status)
 
     @property
     def end_time(self) -> float:

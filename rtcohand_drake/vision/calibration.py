@@ -26,7 +26,7 @@ import numpy as np
 from rtcohand_drake.errors import InputError
 
 DEFAULT_WARNING = ("no --camera-calibration given: using the defaults for a webcam facing the person "
-                   "(60 degrees field of view, 0.5 m away at hand height); see README, \"Use your own hand\"")
+                   "(60 degrees field of view, 0.5 m away at hand height); see docs/own_hand.md")
 
 
 @dc.dataclass

@@ -6,7 +6,7 @@ import dataclasses as dc
 
 @dc.dataclass
 class PoseFilter:
-    """How the hand is held steady in depth (`rtcohand_drake.vision.hand_pose_filter`; docs/camera.md).
+    """How the hand is held steady in depth (`rtcohand_drake.vision.hand_pose_filter`; docs/own_hand.md).
 
     Each frame's metric fit places the hand at a depth set by MediaPipe's guess of
     its size in that frame; these settings fix the size and smooth what is left.
@@ -45,7 +45,7 @@ class Camera:
 
     # The most hands MediaPipe looks for in a frame; the hand rule below picks one. With fewer
     # hands in view than this MediaPipe runs its palm detector on every frame: 1 about halves the
-    # tracker's time (README, "Measured figures"), but then MediaPipe alone picks the hand.
+    # tracker's time (docs/benchmarks.md, the camera source), but then MediaPipe alone picks the hand.
     num_hands: int = 2
     # MediaPipe's confidence thresholds (0..1): palm detection, hand presence, tracking.
     min_detection_confidence: float = 0.5
@@ -56,7 +56,7 @@ class Camera:
     # The camera image is mirrored (a selfie view), so MediaPipe's handedness labels are the person's own.
     mirrored: bool = False
     # A Gaussian blur of this sigma (px; its kernel spans about 2 sigma either side) before MediaPipe;
-    # 0: none. Pixel noise (a GIF's dithered palette) hides hands from the palm detector (docs/camera.md).
+    # 0: none. Pixel noise (a GIF's dithered palette) hides hands from the palm detector (docs/own_hand.md).
     blur_sigma_px: float = 0.65
     # Holding the hand steady in depth.
     pose_filter: PoseFilter = dc.field(default_factory=PoseFilter)

@@ -19,7 +19,6 @@ from rtcohand_drake.data.population.hand_model import hand_keypoints_local
 
 # Bones, base to tip, per finger (thumb, index, middle, ring, pinky).
 FINGERS = ((1, 2, 3, 4), (5, 6, 7, 8), (9, 10, 11, 12), (13, 14, 15, 16), (17, 18, 19, 20))
-PALM = (0, 1, 5, 9, 13, 17)
 SKIN_BGR = np.array([140, 170, 215])  # a mid skin tone; shading darkens the rim
 
 # The hand frame H of the hand model (palm down, fingers +Y, back of the hand +Z)

@@ -4,7 +4,7 @@ Each frame's metric fit (`hand_pose.keypoints_in_camera`) places MediaPipe's
 metric hand where it covers the image landmarks, so the hand's depth is
 proportional to the size MediaPipe guesses for it in that frame. On real
 footage that guess varies by 2-18 % (one sigma) from frame to frame, which puts the
-palm's depth through a range as wide as a swipe (docs/camera.md). Scaling
+palm's depth through a range as wide as a swipe (docs/own_hand.md). Scaling
 the camera-frame points about the camera's centre changes their depth and
 leaves their image exactly as it was, so `HandPoseFilter` only chooses, per
 frame, how far along its rays the hand lies:

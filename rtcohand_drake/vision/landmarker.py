@@ -13,7 +13,7 @@ z away from the camera), and MediaPipe's handedness label and score.
 Each frame is blurred a little first (`Camera.blur_sigma_px`): on real
 footage with pixel-level noise (a GIF's dithered palette) the palm detector
 found no hand in two of ten clips, and after a Gaussian blur of 0.65 px
-it finds one in 93-100 % of the frames of every clip (docs/camera.md).
+it finds one in 93-100 % of the frames of every clip (docs/own_hand.md).
 """
 
 from __future__ import annotations

@@ -12,9 +12,9 @@ from typing import List, Sequence
 import torch
 from torch import nn
 
-NUM_PARTS = 6
-PART_DIM = 6
-FEATURE_DIM = NUM_PARTS * PART_DIM
+from rtcohand_drake.data.hand_features import FEATURE_DIM, PART_DIM, PARTS  # noqa: F401  (numpy only)
+
+NUM_PARTS = len(PARTS)
 MOTION_DIM = 6
 
 

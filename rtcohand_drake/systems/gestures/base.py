@@ -23,7 +23,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.data.hand_features import part_frames, part_velocities
-from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS
+from rtcohand_drake.interfaces import FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS, KEYPOINTS_DIM
 
 NAN_HAND = np.full((21, 3), np.nan)
 
@@ -39,12 +39,12 @@ class KeypointGestureSource(LeafSystem):
         super().__init__()
         self.period_s = 1.0 / rate_hz
         self._prev = self.DeclareDiscreteState(np.concatenate([NAN_HAND.reshape(-1), [np.nan]]))
-        self._features = self.DeclareDiscreteState(36)
+        self._features = self.DeclareDiscreteState(FEATURE_DIM)
         self._status = self.DeclareDiscreteState(np.array([0.0, -np.inf]))
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(GESTURE_FEATURES, self._features)
         self.DeclareStateOutputPort(GESTURE_STATUS, self._status)
-        self.DeclareVectorOutputPort(KEYPOINTS, 63, self._calc_keypoints,
+        self.DeclareVectorOutputPort(KEYPOINTS, KEYPOINTS_DIM, self._calc_keypoints,
                                      prerequisites_of_calc={self.xd_ticket()})
 
     def keypoints_at(self, context) -> tuple[np.ndarray, float]:

@@ -10,7 +10,8 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS
+from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS,
+                                       KEYPOINTS_DIM)
 from rtcohand_drake.systems.gestures.base import NAN_HAND
 
 
@@ -35,9 +36,9 @@ class ReplayGestureSource(LeafSystem):
         self.clip_names = [c.name for c in clips]
         self._skeletons = (np.concatenate([np.asarray(s, float).reshape(len(s), 63) for s in skeletons])
                            if skeletons is not None else None)
-        self.DeclareVectorOutputPort(GESTURE_FEATURES, 36, self._calc_features)
-        self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._calc_status)
-        self.DeclareVectorOutputPort(KEYPOINTS, 63, self._calc_keypoints)
+        self.DeclareVectorOutputPort(GESTURE_FEATURES, FEATURE_DIM, self._calc_features)
+        self.DeclareVectorOutputPort(GESTURE_STATUS, GESTURE_STATUS_DIM, self._calc_status)
+        self.DeclareVectorOutputPort(KEYPOINTS, KEYPOINTS_DIM, self._calc_keypoints)
 
     @property
     def end_time(self) -> float:

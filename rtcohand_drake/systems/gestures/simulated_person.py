@@ -71,11 +71,10 @@ from rtcohand_drake.errors import InputError
 from rtcohand_drake.systems.gestures.base import NAN_HAND, KeypointGestureSource
 from rtcohand_drake.cell.geometry import quaternion_to_matrix, rotation_vector, smoothstep
 from rtcohand_drake.cell.faces import FACES
-from rtcohand_drake.interfaces import INTENDED_TWIST, WORKPIECE_POSE
+from rtcohand_drake.interfaces import INTENDED_TWIST, POSE_DIM, TWIST_DIM, WORKPIECE_POSE
 
 
 FACE_NORMALS_E = np.array([face[1] for face in FACES], float)  # (6, 3)
-PHASES = ("lift", "present", "inspect", "done")
 
 
 @dc.dataclass
@@ -100,7 +99,7 @@ class PersonConfig:
     # Where the part is shown (world). None: straight above where it was first seen, at the lift
     # height, so the turns start as soon as the lift ends. The earlier point nearer the glass,
     # (0.25, 0.15, 0.50), cost two translation strokes (about 9 s) before the first turn
-    # (README, "The inspection task").
+    # (docs/archive.md, "The presentation point and the intent reference on the earlier IK").
     presentation_xyz_W: tuple[float, float, float] | None = None
     presentation_tolerance_m: float = 0.07
     drift_tolerance_m: float = 0.12  # while inspecting, correct the position when further off
@@ -251,12 +250,12 @@ class SimulatedPerson(KeypointGestureSource):
             wander_phase=rng.uniform(0, 6.3, 3),
         )
         initial.curl = self._relaxed.copy()
-        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
+        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, POSE_DIM)
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         # Unrestricted updates run before the base class's discrete update at the same
         # time, so `keypoints_at` reads the skeleton of this period.
         self.DeclarePeriodicUnrestrictedUpdateEvent(self.period_s, 0.0, self._advance)
-        self.DeclareVectorOutputPort(INTENDED_TWIST, 6, self._calc_intended,
+        self.DeclareVectorOutputPort(INTENDED_TWIST, TWIST_DIM, self._calc_intended,
                                      prerequisites_of_calc={self.abstract_state_ticket(self._state)})
 
     # ------------------------------------------------------------------ Drake plumbing

@@ -51,7 +51,10 @@ from rtcohand_drake.systems.diff_ik import clamp_twist
 from rtcohand_drake.cell.layout import Box
 from rtcohand_drake.systems.safety.config import Safety
 from rtcohand_drake.systems.safety.rules import Intervention, Mode, Zones, confidence_scale, limit_to_zones, plausible_features
-from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, OPERATOR, READ_VARIANCE, RESUME_COUNT, SAFETY_STATUS, SPEED_SCALE, TWIST_COMMAND, TWIST_REQUEST, WORKPIECE_POSE
+from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, OPERATOR,
+                                       OPERATOR_DIM, POSE_DIM, READ_VARIANCE, RESUME_COUNT, SAFETY_STATUS,
+                                       SAFETY_STATUS_DIM, SCALAR_DIM, SPEED_SCALE, TWIST_COMMAND, TWIST_DIM,
+                                       TWIST_REQUEST, WORKPIECE_POSE)
 
 
 class SafetySupervisor(LeafSystem):
@@ -69,20 +72,20 @@ class SafetySupervisor(LeafSystem):
         self._dt = config.period_s
         # The watchdog brings the command to zero within one command period.
         self._watchdog_ramp_s = min(command_period_s, config.pause_ramp_s)
-        self._request = self.DeclareVectorInputPort(TWIST_REQUEST, 6)
-        self._gesture = self.DeclareVectorInputPort(GESTURE_STATUS, 2)
-        self._features = self.DeclareVectorInputPort(GESTURE_FEATURES, 36)
-        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, 7)
-        self._operator = self.DeclareVectorInputPort(OPERATOR, 2)
-        self._variance = self.DeclareVectorInputPort(READ_VARIANCE, 1)
+        self._request = self.DeclareVectorInputPort(TWIST_REQUEST, TWIST_DIM)
+        self._gesture = self.DeclareVectorInputPort(GESTURE_STATUS, GESTURE_STATUS_DIM)
+        self._features = self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
+        self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, POSE_DIM)
+        self._operator = self.DeclareVectorInputPort(OPERATOR, OPERATOR_DIM)
+        self._variance = self.DeclareVectorInputPort(READ_VARIANCE, SCALAR_DIM)
         self._command = self.DeclareDiscreteState(np.zeros(6))
         # [mode, resume_count, interventions, paused_input_last, ramp_from_norm_v, ramp_from_norm_w]
         self._state = self.DeclareDiscreteState(np.zeros(6))
         self._scale = self.DeclareDiscreteState(np.ones(1))
         self.DeclarePeriodicDiscreteUpdateEvent(self._dt, 0.0, self._update)
         self.DeclareStateOutputPort(TWIST_COMMAND, self._command)
-        self.DeclareVectorOutputPort(SAFETY_STATUS, 3, self._calc_status, prerequisites_of_calc={self.xd_ticket()})
-        self.DeclareVectorOutputPort(RESUME_COUNT, 1, self._calc_resume, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(SAFETY_STATUS, SAFETY_STATUS_DIM, self._calc_status, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(RESUME_COUNT, SCALAR_DIM, self._calc_resume, prerequisites_of_calc={self.xd_ticket()})
         self.DeclareStateOutputPort(SPEED_SCALE, self._scale)
 
     def limit_to_zones(self, twist_U: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, Intervention]:

@@ -1,6 +1,6 @@
 """Can any linear read of the hand features tell a finger sweep's direction? Development people only.
 
-    python benchmarks/sweep_decodability.py --population-seeds 0 3 4 5 6 7 8 [--model M.pt] [--out DIR]
+    python experiments/sweep_decodability.py --population-seeds 0 3 4 5 6 7 8 [--model M.pt] [--out DIR]
 
 Some simulated people give a motion by sweeping their fingers (flex, spread
 or a thumb flick), the direction carried by which stroke is fast. For every

@@ -1,6 +1,6 @@
 """How far the differential IK moves the part beyond the command, on the intent reference.
 
-    python benchmarks/probe_turn_swing.py [--users u10 u11 u12 u13 u14] [--seed 0] [--population-seed 0]
+    python experiments/probe_turn_swing.py [--users u10 u11 u12 u13 u14] [--seed 0] [--population-seed 0]
         [--set linear_tracking_weight=600 ...]
 
 For each person, the inspection with `IntentPolicy` (the person's intended twist, delayed; the

@@ -1,6 +1,6 @@
 """Which gestures no linear read sees, and whether a signed-square feature (x |x|) lets it see them.
 
-    python benchmarks/probe_signed_square.py --population-seeds 0 3 4 5 6 7 8 \
+    python experiments/probe_signed_square.py --population-seeds 0 3 4 5 6 7 8 \
         [--reports shipped=out/report/report.json signed_square=out/other/report.json]
 
 A finger sweep whose sign is carried by which stroke is fast (out fast, back

@@ -1,6 +1,6 @@
 """Does shifting the context's labels earlier make the command lead the handler's lag?
 
-    python benchmarks/probe_lead.py --data out/population15_s0.h5 [--users u10 u11 u12 u13 u14] [--leads 0 2 4 8]
+    python experiments/probe_lead.py --data out/population15_s0.h5 [--users u10 u11 u12 u13 u14] [--leads 0 2 4 8]
 
 The handler's labels start 150-350 ms after the gesture and then ramp up. A
 lead of k policy steps pairs each context gesture frame with the label k

@@ -1,6 +1,6 @@
 """How well a CCHP checkpoint reads out-sample users' gestures from their own clips.
 
-    python benchmarks/probe_own_context.py --data out/population15.h5 --checkpoint CKPT [CKPT ...] [--clips 24]
+    python experiments/probe_own_context.py --data out/population15.h5 --checkpoint CKPT [CKPT ...] [--clips 24]
 
 For each out-sample user, the first `--clips` clips (file order) are predicted
 free-running with the user's other clips as context (the deployed "Own"

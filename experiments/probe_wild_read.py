@@ -1,6 +1,6 @@
 """How much of a wild read (a context without the gesture's motion) does the safety layer's confidence scaling take out?
 
-    python benchmarks/probe_wild_read.py [--data out/population15_s0.h5] [--model models/cchp_default.pt]
+    python experiments/probe_wild_read.py [--data out/population15_s0.h5] [--model models/cchp_default.pt]
         [--settings D+U+ D-U+ D-U- Unseen Own] [--max-episodes 120]
         [--confidence-floor F] [--confidence-floor-variance V]   (other values than the scenario's, to compare)
 
