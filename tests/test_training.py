@@ -136,3 +136,24 @@ def test_init_from_a_checkpoint(tiny_data, trained, tmp_path):
     run = _run(*args, "--out", str(tmp_path / "bad"), "--init-from", str(trained["ranp"]))
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and "ranp" in lines[0], run.stderr
+
+
+def test_init_from_takes_an_exported_policy(trained, tmp_path):
+    """`--init-from` starts from an exported CCHP policy's weights as from a checkpoint's."""
+    from rtcohand_drake.learning.checkpoint import build_model, load_checkpoint
+    from rtcohand_drake.learning.export import cchp_from_policy
+    from rtcohand_drake.learning.train import init_from_checkpoint
+
+    policy = tmp_path / "policy.pt"
+    run = _run("rtcohand_drake.export", "--checkpoint", str(trained["cchp"]), "--out", str(policy))
+    assert run.returncode == 0, run.stderr
+    source, payload = load_checkpoint(trained["cchp"])
+    fresh = build_model("cchp", payload["model_config"])
+    init_from_checkpoint(fresh, str(policy))
+    rebuilt, _ = cchp_from_policy(policy)
+    for key, value in rebuilt.state_dict().items():
+        if not key.startswith("normalizer."):
+            assert torch.equal(fresh.state_dict()[key], value), key
+    for key, value in source.state_dict().items():  # and those are the checkpoint's own weights
+        if not key.startswith("normalizer.") and key in fresh.state_dict():
+            assert torch.equal(fresh.state_dict()[key], value), key

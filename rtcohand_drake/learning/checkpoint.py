@@ -119,3 +119,15 @@ def load_checkpoint(path: os.PathLike, overrides: Optional[Dict[str, Any]] = Non
         raise CheckpointError(f"{path}: checkpoint does not match its model ({str(err).splitlines()[0]})") from None
     model.eval()
     return model, payload
+
+
+def load_model_file(path: os.PathLike, overrides: Optional[Dict[str, Any]] = None) -> Tuple[nn.Module, Dict[str, Any]]:
+    """A training checkpoint, or an exported CCHP policy file rebuilt as the model it was made
+    from (`export.cchp_from_policy`; the exported step computes what the model computes), with
+    the checkpoint's payload or the policy's model card (kind "cchp")."""
+    if torch_archive_kind(path, "checkpoint") == "torchscript":
+        from rtcohand_drake.learning.export import cchp_from_policy  # export imports this module
+
+        model, card = cchp_from_policy(path, overrides)
+        return model, {**card, "kind": "cchp"}
+    return load_checkpoint(path, overrides)

@@ -49,7 +49,7 @@ import torch
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.batching import collate
 from rtcohand_drake.data.sampling import ALL_SETTINGS, SETTINGS
-from rtcohand_drake.learning.checkpoint import load_checkpoint, parse_overrides
+from rtcohand_drake.learning.checkpoint import load_model_file, parse_overrides
 
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
 MAX_SIGMA_T = 0.05  # m/s
@@ -77,19 +77,6 @@ PAPER_TABLE = {
     "CCHP (p_D,p_U)=(1,1)": [(-239.82, 1.8), (-13.61, 2.29), (577.09, 2.95), (618.49, 3.04), (465.95, 3.01),
                              (121.30, 2.52)],
 }
-
-
-def load_model_file(path: str, overrides: Optional[Dict] = None) -> Tuple[torch.nn.Module, Dict]:
-    """A training checkpoint, or an exported CCHP policy file rebuilt as the model it was made
-    from (`export.cchp_from_policy`; the exported step computes what the model computes)."""
-    from rtcohand_drake.learning.policy_file import torch_archive_kind
-
-    if torch_archive_kind(path, "checkpoint") == "torchscript":
-        from rtcohand_drake.learning.export import cchp_from_policy
-
-        model, card = cchp_from_policy(path, overrides)
-        return model, {**card, "kind": "cchp"}
-    return load_checkpoint(path, overrides)
 
 
 def model_name(payload: Dict) -> str:

@@ -184,10 +184,11 @@ def init_distributed() -> tuple:
 
 
 def init_from_checkpoint(model: nn.Module, path: str) -> None:
-    """Load a checkpoint's learned weights into `model` (the data's normalisation scales are kept)."""
-    from rtcohand_drake.learning.checkpoint import load_checkpoint
+    """Load a checkpoint's (or an exported CCHP policy's) learned weights into `model` (the data's
+    normalisation scales are kept)."""
+    from rtcohand_drake.learning.checkpoint import load_model_file
 
-    source, payload = load_checkpoint(path)
+    source, payload = load_model_file(path)
     if payload["kind"] != getattr(model, "kind", None):
         raise InputError(f"{path}: --init-from needs a {model.kind} checkpoint, this one holds {payload['kind']!r}")
     state = {k: v for k, v in source.state_dict().items() if not k.startswith("normalizer.")}
@@ -370,7 +371,7 @@ _FLAG_HELP = {
     "readout_weight": "CCHP: weight of a loss on the context read r(t) itself predicting the twist (0: off)",
     "threads": "torch threads per process (0: default)",
     "max_minutes": "stop and save after this wall time",
-    "init_from": "start from this checkpoint's weights (same model kind and parameter shapes)",
+    "init_from": "start from this checkpoint's (or exported CCHP policy's) weights (same model kind and parameter shapes)",
 }
 _FLAG_TYPE = {"tf_schedule": parse_tf_schedule}
 
