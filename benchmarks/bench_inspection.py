@@ -1,7 +1,7 @@
 """The inspection task for each out-sample user, through the run CLI itself.
 
     python benchmarks/bench_inspection.py [--model PATH.pt] [--users u10 u11 u12 u13 u14]
-        [--duration 120] [--jobs 2] [--out DIR] [--seed 0] [--filter-mode paper|responsive]
+        [--duration 120] [--workers 2 | --address tcp://HOST:8786] [--out DIR] [--seed 0] [--filter-mode paper|responsive]
         [--correction-weight W] [--population-seed N] [--intent [--intent-delay 0.3]]
 
 Runs `python -m rtcohand_drake.run --scenario inspection --realtime-rate 0
@@ -32,11 +32,12 @@ import argparse
 import subprocess
 import sys
 import tempfile
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from rtcohand_drake.analysis.engine import run_tasks
+from rtcohand_drake.analysis.study import engine_summary
 from rtcohand_drake.diagram import peak_speeds
 from rtcohand_drake.run_log import read_run_log
 from rtcohand_drake.scenario import load_scenario
@@ -64,7 +65,10 @@ def run_user(user: str, args, out: Path) -> tuple[str, int, str]:
     if args.filter_mode:
         cmd += ["--filter-mode", args.filter_mode]
     done = subprocess.run(cmd, capture_output=True, text=True)
-    return user, done.returncode, done.stderr.strip().splitlines()[-1] if done.returncode else ""
+    if done.returncode:
+        last = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise RuntimeError(f"the run command exited with status {done.returncode}: {last}")
+    return user
 
 
 def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
@@ -78,7 +82,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
     log = run_intent_reference(scenario, user, seed=args.seed, population_seed=args.population_seed,
                                delay_s=args.intent_delay, duration_s=args.duration)
     write_run_log(out / f"{user}.h5", log)
-    return user, 0, ""
+    return user
 
 
 def main() -> int:
@@ -87,7 +91,9 @@ def main() -> int:
     p.add_argument("--scenario", default="inspection")
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--duration", type=float, default=120.0)
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--workers", "--jobs", type=int, default=2,
+                   help="local Dask cluster worker processes (0: in this process); docs/studies.md")
+    p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
     p.add_argument("--seed", type=int, default=0, help="the run CLI's --seed: the operators' and the policy's draws")
     p.add_argument("--population-seed", type=int, default=0, help="the population the operators come from")
     p.add_argument("--correction-weight", type=float, default=None,
@@ -127,9 +133,9 @@ def _run(args) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out or tmp)
         out.mkdir(parents=True, exist_ok=True)
-        with ThreadPoolExecutor(args.jobs) as pool:
-            one = run_user_reference if args.intent else run_user
-            results = list(pool.map(lambda u: one(u, args, out), args.users))
+        one = run_user_reference if args.intent else run_user
+        report = run_tasks(one, [(u, (u, args, out)) for u in args.users], workers=args.workers,
+                           address=args.address, label="inspection")
         policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
                   else args.model or "models/cchp_default.pt")
         print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; correction weight "
@@ -138,9 +144,10 @@ def _run(args) -> int:
               "| joint q / v over limit | events |")
         print("|---|---|---|---|---|---|---|---|---|")
         successes = 0
-        for user, rc, err in results:
-            if rc not in (0,):
-                print(f"| {user} | run failed (exit {rc}): {err} |")
+        for outcome in report.outcomes:
+            user = outcome.key
+            if not outcome.ok:
+                print(f"| {user} | run failed after {outcome.attempts} attempts: {outcome.error} |")
                 continue
             log = read_run_log(out / f"{user}.h5")
             v_peak, w_peak = peak_speeds(log.robot_time, log.robot_workpiece_pose)
@@ -163,6 +170,11 @@ def _run(args) -> int:
             print(f"| {user} | {log.faces_inspected}/6 | {completion} | {mold} | {cell_text} | {v_peak:.3f} | {w_peak:.3f} "
                   f"| {max(over_q, 0):.3f} / {max(over_v, 0):.3f} | {events} |")
         print(f"users completing the task safely: {successes}/{len(args.users)}")
+        print(engine_summary(report))
+    if report.failed:
+        print(f"error: {len(report.failed)} run(s) failed: " + ", ".join(str(o.key) for o in report.failed),
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,7 +1,7 @@
 """The policy's read in the closed-loop task: lag and gain against what each simulated person means.
 
     python benchmarks/closed_loop_read.py --population-seeds 0 2 3 [--scenario S] [--model PATH.pt] [--run-seed 0]
-        [--users u10 .. u14] [--correction-weight W] [--intent] [--out DIR]
+        [--users u10 .. u14] [--correction-weight W] [--intent] [--workers 2 | --address tcp://HOST:8786] [--out DIR]
 
 For each out-sample person of each population, the inspection runs in closed
 loop as `python -m rtcohand_drake.run --user U --population-seed N` does,
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtcohand_drake.analysis.closed_loop_read import AXES, markdown, measure
-from rtcohand_drake.analysis.reference_policies import IntentPolicy
+from rtcohand_drake.analysis.closed_loop_read import AXES, markdown, measure_person
+from rtcohand_drake.analysis.engine import run_tasks
 from rtcohand_drake.scenario import load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,6 +45,8 @@ def main(argv=None) -> int:
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--correction-weight", type=float, default=None, help="default: the scenario's")
     p.add_argument("--intent", action="store_true", help="the intent reference in the policy's place")
+    p.add_argument("--workers", type=int, default=2, help="local Dask cluster worker processes (0: in this process)")
+    p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
     p.add_argument("--out", type=Path, default=REPO / "out" / "closed_loop_read")
     args = p.parse_args(argv)
     scenario = load_scenario(args.scenario)
@@ -52,14 +54,20 @@ def main(argv=None) -> int:
         scenario.policy.model = str(args.model.resolve())
     if args.correction_weight is not None:
         scenario.policy.correction_weight = args.correction_weight
-    rows = []
-    for population in args.population_seeds:
-        for user in args.users:
-            policy = IntentPolicy(scenario.policy.rate_hz, 0.3) if args.intent else None
-            rows.append(measure(scenario, user, population, args.run_seed, policy=policy))
-            r = rows[-1]
-            print(f"p{population}/{user}: completion {r.completion_s}, lag {r.lag_s * 1e3:.0f} ms, gains "
-                  + " ".join(f"{a} {g:+.2f}" for a, g in zip(AXES, r.gains) if np.isfinite(g)), flush=True)
+    def describe(o) -> str:
+        r = o.value
+        return (f"p{r.population_seed}/{r.user}: completion {r.completion_s}, lag {r.lag_s * 1e3:.0f} ms, gains "
+                + " ".join(f"{a} {g:+.2f}" for a, g in zip(AXES, r.gains) if np.isfinite(g)))
+
+    tasks = [((population, user), (scenario, user, population, args.run_seed, 0.3 if args.intent else None))
+             for population in args.population_seeds for user in args.users]
+    report = run_tasks(measure_person, tasks, workers=args.workers, address=args.address, label="closed loop",
+                       describe=describe)
+    if report.failed:
+        for o in report.failed:
+            print(f"error: p{o.key[0]}/{o.key[1]} failed after {o.attempts} attempts: {o.error}", file=sys.stderr)
+        return 1
+    rows = [o.value for o in report.outcomes]
     table = markdown(rows)
     used = np.array([r.gains for r in rows])
     lags = [r.lag_s for r in rows]

@@ -64,11 +64,16 @@ def reading(model: str, user: str, seed: int, weight: float | None) -> dict:
 def closed_loop(model: str, seed: int, weight: float | None, intent: bool, out: Path, run_seed: int = 0,
                 duration: float = 180.0) -> dict:
     cmd = [sys.executable, str(REPO / "benchmarks" / "bench_inspection.py"), "--population-seed", str(seed),
-           "--seed", str(run_seed), "--jobs", "2", "--out", str(out), "--duration", str(duration)]
+           "--seed", str(run_seed), "--workers", "2", "--out", str(out), "--duration", str(duration)]
     cmd += ["--intent"] if intent else ["--model", model]
     if weight is not None and not intent:
         cmd += ["--correction-weight", str(weight)]
-    text = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO).stdout
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    if done.returncode:  # a crashed run must not read as "not complete"
+        last = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise SystemExit(f"error: bench_inspection.py (population {seed}, {'intent' if intent else model}) "
+                         f"exited with status {done.returncode}: {last}")
+    text = done.stdout
     times = {}
     for user in OUT_SAMPLE:
         row = next((line for line in text.splitlines() if line.startswith(f"| {user}")), "")

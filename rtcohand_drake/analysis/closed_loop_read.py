@@ -98,6 +98,16 @@ def still_figures(intent: np.ndarray, command: np.ndarray, period_s: float, stil
     return float(v.mean()), float(w.mean()), float(np.mean((v > 1e-3) | (w > 1e-2)))
 
 
+def measure_person(scenario, user: str, population_seed: int, seed: int = 0, intent_delay_s: float | None = None,
+                   duration_s: float | None = None) -> ClosedLoopRead:
+    """`measure` as one task of a sweep (`analysis.engine.run_tasks`): the intent reference with
+    `intent_delay_s`, else the scenario's policy; only picklable arguments."""
+    from rtcohand_drake.analysis.reference_policies import IntentPolicy
+
+    policy = None if intent_delay_s is None else IntentPolicy(scenario.policy.rate_hz, intent_delay_s)
+    return measure(scenario, user, population_seed, seed, policy=policy, duration_s=duration_s)
+
+
 def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=None,
             duration_s: float | None = None, max_lag: int = 8) -> ClosedLoopRead:
     """The inspection for the built-in person `user` of population `population_seed`, with `policy`

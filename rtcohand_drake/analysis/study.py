@@ -1,12 +1,12 @@
-"""The gesture-against-joystick study (`python -m rtcohand_drake.study`).
+"""The gesture-against-joystick study (`python -m rtcohand_drake.study`), on a distributed engine.
 
-    python -m rtcohand_drake.study [--populations 100 101 102] [--jobs 2] [--out docs/results/study]
-        [--conditions responsive paper joystick intent]
+    python -m rtcohand_drake.study [--populations 100-119] [--run-seeds 0 1] [--workers 2 | --address tcp://HOST:8786]
+        [--conditions responsive paper joystick intent] [--cap 180] [--out docs/results/study] [--logs DIR]
 
-For each out-sample person (u10-u14) of each generated population, the
-inspection task is run to its end (all six faces plus the run's short hold,
-or the 180 s cap) in four conditions, under the same cell, IK and safety
-layer:
+For each out-sample person (u10-u14) of each generated population and each
+run seed, the inspection task is run to its end (all six faces plus the
+run's short hold, or the cap) in four conditions, under the same cell, IK
+and safety layer:
 
 - `responsive`: the person's own gestures, read by the shipped policy with
   their own labelled clips as context, the responsive command filter;
@@ -16,22 +16,32 @@ layer:
 - `intent`: the person's intended twist, 0.3 s late, in place of the
   policy (what a perfect reader would get; `analysis.reference_policies`).
 
+A person is a user of a population: their perception delay and decision
+rhythm depend on the run seed and on who they are, in every condition, so
+a person's four runs are paired.
+
+Each run is one task of `analysis.engine.run_tasks`: on a local Dask
+cluster by default, on an existing one with `--address`, or in this process
+(`--workers 0`, or without the `distributed` extra). A run goes through the
+run command's own code (`rtcohand_drake.run.main`), writes its run log to
+`--logs`, and returns its summary. A run that raises is retried once, then
+reported with its error (and the command exits 1).
+
 The paper's figure is the per-person ratio of completion times, gesture over
-joystick: 1.89 +- 0.66. This prints, and writes to `--out`, a table per
-person (completion time, faces, median commanded speed while moving) and the
-median ratio for each gesture condition, with plots of completion times and
-of faces seen over time. Runs go through the run command's own code
-(`rtcohand_drake.run.main`), each in its own process, and keep their run logs.
+joystick: 1.89 +- 0.66. This writes to `--out` a table per person and run
+seed (completion time, faces, median commanded speed while moving), the
+paired comparisons with bootstrap 95 % intervals and a paired test
+(`analysis.study_stats`), the engine's wall time and throughput, and plots
+of the completion times and of the paired times per person.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses as dc
 import contextlib
 import io
 import json
-import statistics
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Sequence
 
@@ -50,34 +60,59 @@ MOVING_SPEED_M_S = 0.005
 MOVING_TURN_RAD_S = 0.02
 
 
-def run_condition(population: int, user: str, condition: str, out: str, seed: int = 0) -> str:
-    """One run, its log written to `out`; returns the log's path."""
-    log = Path(out) / f"p{population}_{user}_{condition}.h5"
-    if condition == "intent":
-        _run_intent(population, user, log, seed)
-        return str(log)
-    from rtcohand_drake.run import main
+def run_condition(population: int, user: str, condition: str, out: str, seed: int = 0,
+                  cap_s: float | None = None) -> dict:
+    """One run, its log written to `out`; returns its summary (`summarise`) with the log's path.
 
-    args = ["--scenario", "inspection", "--realtime-rate", "0", "--no-meshcat", "--user", user,
-            "--population-seed", str(population), "--seed", str(seed), "--log", str(log)]
-    if condition == "joystick":
-        args += ["--gesture-source", "joystick"]
+    `cap_s` replaces the scenario's cap (`duration_s`); the run still ends a short hold after
+    the sixth face. Raises on a run that exits with an error."""
+    log = Path(out) / log_name(population, user, condition, seed)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    if condition == "intent":
+        _run_intent(population, user, log, seed, cap_s)
     else:
-        args += ["--filter-mode", condition]
-    with contextlib.redirect_stdout(io.StringIO()):
-        status = main(args)
+        _run_command(population, user, condition, log, seed, cap_s)
+    return {**summarise(str(log)), "log": str(log)}
+
+
+def log_name(population: int, user: str, condition: str, seed: int) -> str:
+    return f"p{population}_{user}_{condition}_s{seed}.h5"
+
+
+def _run_command(population: int, user: str, condition: str, log: Path, seed: int, cap_s: float | None) -> None:
+    import tempfile
+
+    import yaml
+
+    from rtcohand_drake.run import main
+    from rtcohand_drake.scenario import resolve_scenario_path
+
+    with tempfile.TemporaryDirectory() as folder:
+        scenario = "inspection"
+        if cap_s is not None:  # a copy of the scenario with its cap changed
+            data = yaml.safe_load(resolve_scenario_path(scenario).read_text())
+            data["duration_s"] = float(cap_s)
+            scenario = str(Path(folder) / "inspection_capped.yaml")
+            Path(scenario).write_text(yaml.safe_dump(data, sort_keys=False))
+        args = ["--scenario", scenario, "--realtime-rate", "0", "--no-meshcat", "--user", user,
+                "--population-seed", str(population), "--seed", str(seed), "--log", str(log)]
+        if condition == "joystick":
+            args += ["--gesture-source", "joystick"]
+        else:
+            args += ["--filter-mode", condition]
+        with contextlib.redirect_stdout(io.StringIO()):
+            status = main(args)
     if status != 0:
         raise RuntimeError(f"{log.name}: the run exited with status {status}")
-    return str(log)
 
 
-def _run_intent(population: int, user: str, log: Path, seed: int) -> None:
+def _run_intent(population: int, user: str, log: Path, seed: int, cap_s: float | None) -> None:
     from rtcohand_drake.analysis.reference_policies import run_intent_reference
     from rtcohand_drake.run_log import write_run_log
     from rtcohand_drake.scenario import load_scenario
 
     write_run_log(log, run_intent_reference(load_scenario("inspection"), user, seed=seed, population_seed=population,
-                                            stop_when_done=True))
+                                            duration_s=cap_s, stop_when_done=True))
 
 
 def summarise(path: str) -> dict:
@@ -109,123 +144,173 @@ def summarise(path: str) -> dict:
     }
 
 
-def ratios(results: dict, condition: str) -> list[float]:
-    """Per person, completion time in `condition` over the joystick's (both completed)."""
-    out = []
-    for person, runs in results.items():
-        a, b = runs.get(condition), runs.get("joystick")
-        if a and b and a["completed"] and b["completed"]:
-            out.append(a["completion_s"] / b["completion_s"])
-    return out
+# The comparisons the study reports: (condition, baseline).
+COMPARISONS = (("responsive", "joystick"), ("paper", "joystick"), ("responsive", "intent"), ("paper", "responsive"),
+               ("intent", "joystick"))
 
 
-def markdown(results: dict, conditions: Sequence[str]) -> str:
-    lines = ["| person | " + " | ".join(f"{c}: time (faces), median v / w" for c in conditions) + " |",
-             "|---|" + "---|" * len(conditions)]
+def collect(outcomes, conditions: Sequence[str]) -> tuple[dict, list[dict]]:
+    """`{person: {condition: {run_seed: summary or None}}}` and the failed runs, from the engine's outcomes."""
+    results: dict = {}
+    failed = []
+    for o in outcomes:
+        population, user, condition, seed = o.key
+        person = f"p{population}/{user}"
+        results.setdefault(person, {c: {} for c in conditions})[condition][seed] = o.value if o.ok else None
+        if not o.ok:
+            failed.append({"person": person, "condition": condition, "run_seed": seed, "attempts": o.attempts,
+                           "error": o.error})
+    return results, failed
+
+
+def comparisons(results: dict, conditions: Sequence[str], cap_s: float, n_boot: int = 10000) -> list:
+    from rtcohand_drake.analysis.study_stats import compare
+
+    return [compare(results, a, b, cap_s, n_boot=n_boot) for a, b in COMPARISONS if a in conditions and b in conditions]
+
+
+def markdown(results: dict, conditions: Sequence[str], cap_s: float, failed: Sequence[dict] = (),
+             n_boot: int = 10000, engine_line: str = "") -> str:
+    """Per person and run seed, the time (faces) and median speeds; then the paired comparisons."""
+    lines = ["| person | run seed | " + " | ".join(f"{c}: time (faces), median v / w" for c in conditions) + " |",
+             "|---|---|" + "---|" * len(conditions)]
     for person, runs in results.items():
-        cells = []
-        for c in conditions:
-            r = runs.get(c)
-            if r is None:
-                cells.append("-")
-                continue
-            time = f"{r['completion_s']:.1f} s" if r["completed"] else "not done"
-            cells.append(f"{time} ({r['faces']}/6), {r['median_speed_m_s']:.3f} m/s / {r['median_turn_rad_s']:.2f} rad/s")
-        lines.append(f"| {person} | " + " | ".join(cells) + " |")
-    lines.append("")
-    for c in conditions:
-        if c == "joystick":
-            continue
-        r = ratios(results, c)
-        done = sum(1 for runs in results.values() if runs.get(c) and runs[c]["completed"])
-        lines.append(f"- **{c} / joystick completion time**: median {statistics.median(r):.2f} "
-                     f"(mean {np.mean(r):.2f} +- {np.std(r):.2f}, {len(r)} people); "
-                     f"{c} completed {done}/{len(results)}" if r else f"- {c}: no person completed both")
-    done = sum(1 for runs in results.values() if runs.get("joystick") and runs["joystick"]["completed"])
-    lines.append(f"- joystick completed {done}/{len(results)}; the paper's gesture / joystick ratio: "
-                 f"{PAPER_RATIO[0]} +- {PAPER_RATIO[1]}")
+        seeds = sorted({s for c in conditions for s in runs.get(c, {})})
+        for seed in seeds:
+            cells = []
+            for c in conditions:
+                r = runs.get(c, {}).get(seed, "missing")
+                if r == "missing":
+                    cells.append("-")
+                elif r is None:
+                    cells.append("failed")
+                else:
+                    time = f"{r['completion_s']:.1f} s" if r["completed"] else "not done"
+                    cells.append(f"{time} ({r['faces']}/6), {r['median_speed_m_s']:.3f} m/s / "
+                                 f"{r['median_turn_rad_s']:.2f} rad/s")
+            lines.append(f"| {person} | {seed} | " + " | ".join(cells) + " |")
+    lines += ["", f"Paired ratios of completion time, per person (mean over run seeds; a run not finished "
+                  f"counts as the cap, {cap_s:g} s):", ""]
+    lines += [c.line() for c in comparisons(results, conditions, cap_s, n_boot)]
+    lines.append(f"- the paper's gesture / joystick ratio: {PAPER_RATIO[0]} +- {PAPER_RATIO[1]}")
+    if failed:
+        lines += ["", f"Runs failed with an error after a retry ({len(failed)}):", ""]
+        lines += [f"- {f['person']} {f['condition']} run seed {f['run_seed']}: {f['error']}" for f in failed]
+    if engine_line:
+        lines += ["", engine_line]
     return "\n".join(lines) + "\n"
 
 
-def plot(results: dict, conditions: Sequence[str], out: Path) -> None:
+def plot(results: dict, conditions: Sequence[str], cap_s: float, out: Path) -> None:
+    """Completion-time distributions per condition, and one line per person across the conditions."""
     from matplotlib.figure import Figure
+
+    from rtcohand_drake.analysis.study_stats import person_time
 
     fig = Figure(figsize=(11, 4))
     ax, ax2 = fig.subplots(1, 2)
-    people = list(results)
-    width = 0.8 / len(conditions)
-    for k, c in enumerate(conditions):
-        times = [results[p][c]["completion_s"] if results[p].get(c) and results[p][c]["completed"] else np.nan
-                 for p in people]
-        ax.bar(np.arange(len(people)) + k * width, times, width, label=c)
-    ax.set_xticks(np.arange(len(people)) + 0.4 - width / 2, people, rotation=60, fontsize=7)
-    ax.set_ylabel("completion time (s); missing = not done")
-    ax.legend(fontsize=8)
-    ax.set_title("inspection completion per person")
-    for k, c in enumerate(conditions):
-        for p in people:
-            r = results[p].get(c)
-            if r is None:
-                continue
-            t = [0.0] + r["face_times_s"]
-            ax2.step(t, np.arange(len(t)), where="post", color=f"C{k}", alpha=0.35, lw=1)
-        ax2.plot([], [], color=f"C{k}", label=c)
-    ax2.set_xlabel("time (s)")
-    ax2.set_ylabel("faces inspected")
-    ax2.legend(fontsize=8)
-    ax2.set_title("faces over time (one line per person)")
+    per_run = [[(r["completion_s"] if r["completed"] else cap_s) for runs in results.values()
+                for r in runs.get(c, {}).values() if r is not None] for c in conditions]
+    ax.boxplot(per_run, showfliers=False)
+    for k, times in enumerate(per_run, 1):
+        jitter = np.random.default_rng(k).uniform(-0.15, 0.15, len(times))
+        ax.scatter(k + jitter, times, s=6, alpha=0.4, color=f"C{k - 1}")
+    ax.set_xticks(range(1, len(conditions) + 1), conditions)
+    ax.axhline(cap_s, color="grey", lw=0.8, ls="--")
+    ax.set_ylabel(f"completion time (s); not done = cap ({cap_s:g} s)")
+    ax.set_title("completion time per run")
+    for runs in results.values():
+        times = [person_time(runs.get(c, {}), cap_s) for c in conditions]
+        ax2.plot(range(len(conditions)), [np.nan if t is None else t for t in times], color="C0", alpha=0.25, lw=0.8,
+                 marker=".")
+    ax2.set_xticks(range(len(conditions)), conditions)
+    ax2.set_yscale("log")
+    ax2.set_ylabel("person's mean completion time (s)")
+    ax2.set_title("paired: one line per person")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
 
 
+def _int_list(text: str) -> list[int]:
+    """'100-119' or '100' as a list of ints (the command line's population ranges)."""
+    if "-" in text.strip("-"):
+        a, b = text.split("-", 1)
+        return list(range(int(a), int(b) + 1))
+    return [int(text)]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.study", description=__doc__.splitlines()[0])
-    p.add_argument("--populations", type=int, nargs="+", default=[100, 101, 102])
+    p.add_argument("--populations", type=_int_list, nargs="+", default=[[100], [101], [102]],
+                   help="population seeds, or ranges such as 100-119 (five out-sample people each)")
     p.add_argument("--users", nargs="+", default=list(OUT_SAMPLE))
     p.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(CONDITIONS))
-    p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--run-seeds", type=int, nargs="+", default=None,
+                   help="the runs' --seed (the people's decision rhythm), each person runs each (default: 0)")
+    p.add_argument("--seed", type=int, default=None, help="one run seed (the same as --run-seeds N)")
+    p.add_argument("--cap", type=float, default=None, help="the runs' time cap (s; default: the scenario's)")
+    p.add_argument("--workers", "--jobs", type=int, default=2,
+                   help="local cluster worker processes; 0 runs in this process")
+    p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
+    p.add_argument("--bootstrap", type=int, default=10000, help="bootstrap resamples for the intervals")
     p.add_argument("--out", type=Path, default=Path("docs/results/study"))
     p.add_argument("--logs", type=Path, default=None, help="where the run logs go (default: OUT/logs)")
     p.add_argument("--summarise-only", action="store_true",
-                   help="run nothing: summarise the run logs already in the logs folder (people with any)")
+                   help="run nothing: summarise the run logs already in the logs folder")
     args = p.parse_args(argv)
-    logs = args.logs or args.out / "logs"
+    from rtcohand_drake.analysis.engine import Outcome, run_tasks
+    from rtcohand_drake.scenario import load_scenario
+
+    populations = [n for group in args.populations for n in group]
+    seeds = args.run_seeds or [args.seed if args.seed is not None else 0]
+    cap = args.cap if args.cap is not None else load_scenario("inspection").duration_s
+    logs = (args.logs or args.out / "logs").resolve()
     logs.mkdir(parents=True, exist_ok=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    jobs = [(pop, user, c) for pop in args.populations for user in args.users for c in args.conditions]
-    results: dict = {f"p{pop}/{user}": {} for pop in args.populations for user in args.users}
+    keys = [(pop, user, c, seed) for pop in populations for user in args.users for seed in seeds
+            for c in args.conditions]
+    engine_line = ""
     if args.summarise_only:
-        for pop, user, c in jobs:
-            path = logs / f"p{pop}_{user}_{c}.h5"
+        outcomes = []
+        for key in keys:
+            path = logs / log_name(*key)
             if path.is_file():
-                results[f"p{pop}/{user}"][c] = summarise(str(path))
-        results = {person: runs for person, runs in results.items() if runs}
-        return _report(results, args)
-    with ProcessPoolExecutor(args.jobs) as pool:
-        futures = {pool.submit(run_condition, pop, user, c, str(logs), args.seed): (pop, user, c)
-                   for pop, user, c in jobs}
-        for n, future in enumerate(futures, 1):
-            pop, user, c = futures[future]
-            try:
-                results[f"p{pop}/{user}"][c] = summarise(future.result())
-                r = results[f"p{pop}/{user}"][c]
-                state = f"{r['completion_s']:.1f} s" if r["completed"] else f"not done ({r['faces']}/6)"
-            except Exception as err:  # one failed run is reported, not fatal
-                state = f"failed: {err}"
-            print(f"[{n}/{len(jobs)}] population {pop} {user} {c}: {state}", flush=True)
-    return _report(results, args)
+                outcomes.append(Outcome(key, {**summarise(str(path)), "log": str(path)}, attempts=1))
+    else:
+        def describe(o: Outcome) -> str:
+            pop, user, c, seed = o.key
+            state = f"{o.value['completion_s']:.1f} s" if o.value["completed"] else f"not done ({o.value['faces']}/6)"
+            return f"population {pop} {user} {c} run seed {seed}: {state} ({o.seconds:.0f} s wall)"
 
-
-def _report(results: dict, args) -> int:
-    table = markdown(results, args.conditions)
+        report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap)) for k in keys],
+                           workers=args.workers, address=args.address, label="study", describe=describe)
+        outcomes = report.outcomes
+        engine_line = engine_summary(report)
+    results, failed = collect(outcomes, args.conditions)
+    table = markdown(results, args.conditions, cap, failed, args.bootstrap, engine_line)
     print(table)
     (args.out / "study.md").write_text(table)
-    (args.out / "study.json").write_text(json.dumps({"populations": args.populations, "seed": args.seed,
-                                                     "results": results}, indent=1))
-    plot(results, args.conditions, args.out / "study.png")
+    summary = {"populations": populations, "run_seeds": seeds, "cap_s": cap, "conditions": args.conditions,
+               "results": {person: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
+                           for person, by_c in results.items()},
+               "failed": failed,
+               "comparisons": [dc.asdict(c) for c in comparisons(results, args.conditions, cap, args.bootstrap)]}
+    (args.out / "study.json").write_text(json.dumps(summary, indent=1))
+    plot(results, args.conditions, cap, args.out / "study.png")
     print(f"wrote {args.out / 'study.md'}, study.json and study.png")
-    return 0
+    return 1 if failed else 0
+
+
+def engine_summary(report, projections: Sequence[int] = (16, 64, 256)) -> str:
+    """Wall time, throughput per worker (start-up included) and what it projects for larger clusters."""
+    done = sum(o.ok for o in report.outcomes)
+    per_worker_h = report.throughput_per_worker_h()
+    text = (f"Engine: {report.engine}, {report.workers} worker(s); {done}/{len(report.outcomes)} runs in "
+            f"{report.wall_s / 60:.1f} min wall; {per_worker_h:.0f} runs per worker-hour (start-up included)")
+    if per_worker_h > 0:
+        text += "; the same runs would take, at that rate, " + ", ".join(
+            f"{len(report.outcomes) / (per_worker_h * w) * 60:.1f} min on {w}" for w in projections) + " workers"
+    return text + "."
 
 
 def entry_point() -> None:

@@ -224,7 +224,8 @@ class SimulatedPerson(KeypointGestureSource):
     """A simulated person who moves and turns the workpiece with one user's gestures (see module doc)."""
 
     def __init__(self, user: UserProfile, X_WU, eye_W, config: PersonConfig | None = None,
-                 generator: GeneratorConfig | None = None, rate_hz: float = 10.0, seed: int = 0):
+                 generator: GeneratorConfig | None = None, rate_hz: float = 10.0, seed: int = 0,
+                 population_seed: int | None = None):
         super().__init__(rate_hz)
         self.user = user
         self.config = config or PersonConfig()
@@ -240,8 +241,15 @@ class SimulatedPerson(KeypointGestureSource):
         self._R_rest = rest_rotation(user)
         self._relaxed = relaxed_curl(user)
 
-        # Deterministic in (seed, user): the person's own randomness, apart from the dataset's.
-        rng = np.random.default_rng([int(seed), 7351, *(ord(c) for c in user.user_id)])
+        # Deterministic in (seed, person): the person's own randomness (perception delay, tremor,
+        # decision rhythm), apart from the dataset's. A person is a user id of a population: the
+        # population's seed joins the key, so that u10 of population 101 is not u10 of 102 at the
+        # joystick or as the intent reference either. The benchmark population (DEFAULT_SEED, or
+        # None) keeps the key without it, so its runs are unchanged.
+        key = [int(seed), 7351, *(ord(c) for c in user.user_id)]
+        if population_seed is not None and int(population_seed) != DEFAULT_SEED:
+            key += [8191, int(population_seed)]
+        rng = np.random.default_rng(key)
         initial = PersonState(
             rng=rng,
             delay_s=float(rng.uniform(*self.config.perception_delay_s)),
@@ -611,7 +619,8 @@ def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
         pc = to_policy_clip(clip, rate)
         pieces.append((pc.features, pc.labels))
     X_WU = scenario.cell.user_frame.to_rigid_transform()
-    person = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed)
+    person = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed,
+                             population_seed=population_seed)
     return person, pieces
 
 

@@ -1,0 +1,234 @@
+"""The study on the distributed engine: its runs, its statistics and the joystick operator it compares against."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+
+from rtcohand_drake.analysis import study
+from rtcohand_drake.analysis.engine import distributed_available, run_tasks
+from rtcohand_drake.analysis.study_stats import bootstrap_ci, compare, person_time, sign_flip_p
+from rtcohand_drake.interfaces import INTENDED_TWIST, TWIST_REQUEST
+from rtcohand_drake.run_log import read_run_log
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.systems.joystick import ROTATION, TRANSLATION, Joystick, JoystickMapper, joystick_twist
+
+needs_dask = pytest.mark.skipif(not distributed_available(), reason="the distributed extra is not installed")
+
+
+# --- the joystick operator's semantics -------------------------------------------------------------------------
+
+
+def test_joystick_pushes_the_largest_axes_at_the_fixed_speed():
+    cfg = Joystick()
+    # Translation wanted most (0.1/0.2 = 0.5 of full, against 0.1/0.5 = 0.2): three linear axes wished,
+    # the two largest pushed fully, with their signs; the rotation waits.
+    mode, twist = joystick_twist(np.array([0.1, -0.06, 0.02, 0.1, 0, 0]), ROTATION, cfg)
+    assert mode == TRANSLATION
+    np.testing.assert_allclose(twist, [0.2, -0.2, 0, 0, 0, 0])
+    # Rotation wanted most: pushed at the angular speed.
+    mode, twist = joystick_twist(np.array([0.01, 0, 0, 0, 0, -0.4]), TRANSLATION, cfg)
+    assert mode == ROTATION
+    np.testing.assert_allclose(twist, [0, 0, 0, 0, 0, -0.5])
+
+
+def test_joystick_deadband_and_axis_count():
+    cfg = Joystick(max_axes=1, deadband=0.15)
+    # Below the deadband (0.14 of full speed on every axis): nothing moves, the mode stays.
+    mode, twist = joystick_twist(np.array([0.028, 0, 0, 0.07, 0, 0]), ROTATION, cfg)
+    assert mode == ROTATION and not twist.any()
+    # One axis at a time.
+    _, twist = joystick_twist(np.array([0.1, 0.15, 0.12, 0, 0, 0]), TRANSLATION, cfg)
+    np.testing.assert_allclose(twist, [0, 0.2, 0, 0, 0, 0])
+    # A second axis under the deadband is not pushed even when two are allowed.
+    _, twist = joystick_twist(np.array([0.1, 0.02, 0, 0, 0, 0]), TRANSLATION, Joystick())
+    np.testing.assert_allclose(twist, [0.2, 0, 0, 0, 0, 0])
+    # NaN wishes read as none.
+    _, twist = joystick_twist(np.array([np.nan, 0.1, 0, 0, 0, 0]), TRANSLATION, Joystick())
+    np.testing.assert_allclose(twist, [0, 0.2, 0, 0, 0, 0])
+
+
+def _mapper_output(intent, cfg: Joystick, until_s: float):
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(np.asarray(intent, float)))
+    mapper = builder.AddSystem(JoystickMapper(cfg))
+    builder.Connect(source.get_output_port(), mapper.GetInputPort(INTENDED_TWIST))
+    sink = builder.AddSystem(VectorLogSink(6, publish_period=cfg.period_s))
+    builder.Connect(mapper.GetOutputPort(TWIST_REQUEST), sink.get_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(until_s)
+    log = sink.FindLog(simulator.get_context())
+    return log.sample_times(), log.data().T
+
+
+def test_joystick_mode_toggle_dwells_before_moving():
+    cfg = Joystick(toggle_dwell_s=0.6, period_s=0.02)
+    # The mapper starts in translation: a rotation wish costs a toggle, and nothing moves for 0.6 s.
+    t, twist = _mapper_output([0, 0, 0, 0, 0.3, 0], cfg, 1.0)
+    moving = np.abs(twist[:, 4]) > 0
+    assert not moving[t < 0.6 - 1e-9].any()
+    assert moving[t > 0.6 + cfg.period_s + 1e-9].all()
+    np.testing.assert_allclose(twist[t > 0.65, 4], 0.5)
+    # A translation wish in the starting mode moves at once (from the first update).
+    t, twist = _mapper_output([0, 0, 0.1, 0, 0, 0], cfg, 0.2)
+    assert (twist[t >= cfg.period_s - 1e-9, 2] == 0.2).all()
+
+
+# --- each person is their own operator -------------------------------------------------------------------------
+
+
+def _delay(population: int, user: str = "u10", seed: int = 0) -> float:
+    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+
+    person, _ = make_builtin_person(load_scenario("inspection"), seed=seed, user=user, population_seed=population)
+    return person.CreateDefaultContext().get_abstract_state(0).get_value().delay_s
+
+
+def test_the_person_and_not_only_the_run_seed_sets_the_rhythm():
+    from rtcohand_drake.data.population import DEFAULT_SEED
+
+    delays = {p: _delay(p) for p in (101, 102, 103)}
+    assert len(set(delays.values())) == 3  # u10 of three populations: three operators
+    assert _delay(101, seed=1) != delays[101]
+    assert _delay(101) == delays[101]  # deterministic
+    # The benchmark population keeps its key (its runs and figures are unchanged): population_seed None.
+    from rtcohand_drake.cell.plant import eye_position
+    from rtcohand_drake.data.population import GeneratorConfig, simulate_user
+    from rtcohand_drake.systems.gestures.simulated_person import SimulatedPerson, population_user_ids
+
+    scenario = load_scenario("inspection")
+    generator = GeneratorConfig()
+    ids = population_user_ids(generator)
+    profile, _, _ = simulate_user(generator, list(ids).index("u10"), ids["u10"], DEFAULT_SEED)
+    old = SimulatedPerson(profile, scenario.cell.user_frame.to_rigid_transform(), eye_position(scenario.cell),
+                          rate_hz=scenario.policy.rate_hz, seed=0)
+    assert old.CreateDefaultContext().get_abstract_state(0).get_value().delay_s == _delay(DEFAULT_SEED)
+
+
+# --- statistics -----------------------------------------------------------------------------------------------
+
+
+def _run(t: float | None) -> dict:
+    return {"completed": t is not None, "completion_s": t, "faces": 6 if t is not None else 3}
+
+
+def test_paired_ratios_count_slow_people_at_the_cap_and_leave_out_failed_runs():
+    cap = 100.0
+    results = {
+        "a": {"responsive": {0: _run(30.0), 1: _run(50.0)}, "joystick": {0: _run(20.0), 1: _run(20.0)}},
+        "b": {"responsive": {0: _run(None), 1: _run(60.0)}, "joystick": {0: _run(40.0), 1: _run(None)}},
+        "c": {"responsive": {0: _run(25.0), 1: None}, "joystick": {0: _run(25.0), 1: _run(25.0)}},
+        "d": {"responsive": {0: _run(10.0), 1: _run(10.0)}, "joystick": {0: _run(40.0), 1: _run(40.0)}},
+    }
+    assert person_time(results["b"]["responsive"], cap) == 80.0
+    assert person_time(results["c"]["responsive"], cap) is None
+    c = compare(results, "responsive", "joystick", cap, n_boot=500)
+    # a: 40/20 = 2; b: (100+60)/2 / ((40+100)/2) = 80/70; d: 10/40; c left out (a failed run).
+    expected = {"a": 2.0, "b": 80.0 / 70.0, "d": 0.25}
+    assert c.ratios.keys() == expected.keys()
+    for person, r in expected.items():
+        assert c.ratios[person] == pytest.approx(r)
+    assert c.median == pytest.approx(80.0 / 70.0)
+    assert c.mean == pytest.approx(np.mean(list(expected.values())))
+    assert c.failed_people == ["c"]
+    assert c.not_done == {"responsive": 1, "joystick": 1}
+    assert c.runs == {"responsive": 6, "joystick": 6}
+    # Exact sign-flip test over 3 people: every one of the 8 sign patterns, counted here independently.
+    d = np.log(list(expected.values()))
+    count = sum(abs(np.dot(s, d)) / 3 >= abs(d.mean()) - 1e-12 for s in itertools.product((1, -1), repeat=3))
+    assert c.p_value == pytest.approx(count / 8)
+    assert "left out for a failed run: 1 (c)" in c.line()
+
+
+def test_sign_flip_p_values():
+    assert sign_flip_p([1.0, 1.0, 1.0]) == pytest.approx(2 / 8)  # all same sign: the two extreme patterns
+    assert sign_flip_p([0.3, 0.1, 0.2, 0.4, 0.5]) == pytest.approx(2 / 32)
+    assert sign_flip_p([1.0, -1.0]) == 1.0
+    # Many people, a clear effect: the random patterns give a small p-value, never 0.
+    rng = np.random.default_rng(0)
+    p = sign_flip_p(rng.normal(0.5, 0.3, 40))
+    assert 0 < p < 0.001
+    # No effect: not significant.
+    assert sign_flip_p(rng.normal(0.0, 1.0, 40)) > 0.01
+
+
+def test_bootstrap_interval_matches_the_normal_theory_for_a_mean():
+    rng = np.random.default_rng(1)
+    x = rng.normal(1.5, 0.4, 400)
+    lo, hi = bootstrap_ci(x, np.mean, n_boot=4000, seed=3)
+    half = 1.96 * x.std(ddof=1) / np.sqrt(len(x))
+    assert lo == pytest.approx(x.mean() - half, abs=0.15 * half)
+    assert hi == pytest.approx(x.mean() + half, abs=0.15 * half)
+    # A median's interval holds the median and lies within the data.
+    lo, hi = bootstrap_ci(x, np.median, n_boot=2000)
+    assert x.min() < lo < np.median(x) < hi < x.max()
+    assert bootstrap_ci([2.0, 2.0, 2.0]) == (2.0, 2.0)
+
+
+# --- the engine ----------------------------------------------------------------------------------------------
+
+
+def _strip(summary: dict) -> dict:
+    return {k: v for k, v in summary.items() if k != "log"}
+
+
+TINY = [(101, "u10"), (102, "u10")]  # two people: the same user id in two populations
+
+
+@pytest.mark.slow
+@needs_dask
+def test_a_two_worker_cluster_gives_the_in_process_results(tmp_path):
+    def tasks(folder):
+        return [((p, u, c, 0), (p, u, c, str(tmp_path / folder), 0, 2.0)) for p, u in TINY
+                for c in ("joystick", "responsive")]
+
+    here = run_tasks(study.run_condition, tasks("here"), workers=0, progress=False)
+    cluster = run_tasks(study.run_condition, tasks("cluster"), workers=2, progress=False)
+    assert here.engine == "in-process" and cluster.engine.startswith("dask") and cluster.workers == 2
+    assert [o.key for o in here.outcomes] == [o.key for o in cluster.outcomes]
+    for a, b in zip(here.outcomes, cluster.outcomes):
+        assert a.ok and b.ok, (a.error, b.error)
+        assert a.attempts == b.attempts == 1
+        assert _strip(a.value) == _strip(b.value)
+        log_a, log_b = read_run_log(a.value["log"]), read_run_log(b.value["log"])
+        np.testing.assert_array_equal(log_a.command_twist, log_b.command_twist)
+    # Each person is their own operator: the same user id at the joystick, two populations, two commands.
+    joystick = {o.key[0]: read_run_log(o.value["log"]).command_twist for o in here.outcomes if o.key[2] == "joystick"}
+    assert joystick[101].shape != joystick[102].shape or not np.array_equal(joystick[101], joystick[102])
+
+
+@pytest.mark.parametrize("workers", [0, pytest.param(2, marks=needs_dask)])
+def test_a_run_that_raises_is_retried_once_then_reported(tmp_path, workers):
+    # u99 is no user of the population: the intent run raises the one-line input error each time.
+    tasks = [(("bad",), (101, "u99", "intent", str(tmp_path), 0, 1.0)),
+             (("good",), (101, "u10", "intent", str(tmp_path), 0, 1.0))]
+    report = run_tasks(study.run_condition, tasks, workers=workers, progress=False)
+    bad, good = report.outcomes
+    assert not bad.ok and bad.attempts == 2 and "unknown user 'u99'" in bad.error
+    assert good.ok and good.attempts == 1 and good.value["completed"] is False
+    assert report.failed == [bad]
+
+
+def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsys):
+    # In this process: a person who cannot run is reported with the error, and the exit status says so.
+    out = tmp_path / "study"
+    status = study.main(["--populations", "101", "--users", "u10", "u99", "--conditions", "joystick", "intent",
+                         "--cap", "1", "--workers", "0", "--bootstrap", "200", "--out", str(out)])
+    assert status == 1
+    text = (out / "study.md").read_text()
+    assert "Runs failed with an error after a retry (2):" in text
+    assert "p101/u99 joystick run seed 0" in text and "unknown user 'u99'" in text
+    data = json.loads((out / "study.json").read_text())
+    run = data["results"]["p101/u10"]["joystick"]["0"]
+    assert run["completed"] is False and run["completion_s"] is None and 0 <= run["faces"] < 6  # capped at 1 s
+    assert data["results"]["p101/u99"]["intent"]["0"] is None
+    assert [c["condition"] for c in data["comparisons"]] == ["intent"]
+    assert (out / "study.png").stat().st_size > 0
+    assert "Engine: in-process" in text
