@@ -105,13 +105,23 @@ def eye_position(cell: Cell) -> np.ndarray:
     return plant.GetFrameByName("eye", instances["inspector"]).CalcPoseInWorld(context).translation()
 
 
+# Parsed control plants, by the cell's full description: the models are parsed once per process
+# (a study's worker runs many runs), not once per caller and run.
+_CONTROL_PLANTS: dict[str, tuple[MultibodyPlant, object]] = {}
+
+
 def make_control_plant(cell: Cell) -> tuple[MultibodyPlant, object]:
     """A plant with the same kinematics, for controllers' own kinematic queries.
 
     Controllers never read the station's internal plant, so they work the same
-    against the hardware station.
+    against the hardware station. The plant is finalized and shared: one per
+    cell layout and process. Callers make their own contexts and never change
+    the plant itself.
     """
-    plant = MultibodyPlant(time_step=0.0)
-    instances = add_cell_models(plant, cell)
-    plant.Finalize()
-    return plant, instances
+    key = repr(cell)
+    if key not in _CONTROL_PLANTS:
+        plant = MultibodyPlant(time_step=0.0)
+        instances = add_cell_models(plant, cell)
+        plant.Finalize()
+        _CONTROL_PLANTS[key] = (plant, instances)
+    return _CONTROL_PLANTS[key]
