@@ -3,7 +3,7 @@
     python -m rtcohand_drake.record --out ME.h5 --user ME
         [--camera N | --video PATH | --simulated-user uXX [--population-seed N]]
         [--camera-calibration FILE] [--no-meshcat] [--only Tx+,Rz-] [--seed N] [--scenario S]
-        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]]
+        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]] [--style hold|stroke]
 
 The protocol is the paper's: for each target motion Meshcat shows a cue, a
 workpiece moving the way the person should ask for, after a countdown; the
@@ -16,6 +16,16 @@ was trained on labels that follow the gesture (a handler's, who reacts
 late). So the labels are the cue's twist shifted later by
 `Protocol.response_delay_s` + `Protocol.label_lag_s`; the file records the
 shift (root attribute `label_delay_s`).
+`--style` says how the person gestures, and the cue follows it:
+- `hold` (the default): the person keeps moving or turning the hand for as
+  long as the part should move; the cue moves for 2.5 s;
+- `stroke`: the person makes one short stroke in the motion's direction
+  (out, and back if they like), as many people do (recorded hands:
+  docs/real_people.md); the cue moves faster for 1.2 s, at the speeds and
+  ramps of the labels `data.import_shrec17` gives recorded strokes.
+The style goes into the file (`recorder` attribute, `protocol.style`), and
+the reading check gives advice for that style.
+
 Clips are written per the gesture dataset contract, the person as the user
 (group "out-sample", split "train"). Then the reading check
 (`rtcohand_drake.analysis.context_reading`) runs on the new file and names
@@ -83,6 +93,25 @@ class Protocol:
     # Chosen with benchmarks/recorded_context.py on simulated people u10 and u13 of population 0
     # (total shifts 0.45, 0.55, 0.65 s: 0.55 gave the lowest error).
     label_lag_s: float = 0.4
+    style: str = "hold"  # how the person gestures: "hold" the motion, or one "stroke"
+
+
+STYLES = ("hold", "stroke")
+PROMPTS = {"hold": "gesture while the cue moves, and keep the motion going for as long as it moves",
+           "stroke": "make one stroke in the cue's direction as it moves (out, and back if you like)"}
+
+
+def protocol_for(style: str) -> Protocol:
+    """The session's timing for a gesture style (module docstring)."""
+    if style not in STYLES:
+        raise InputError(f"command line: --style must be one of {', '.join(STYLES)}, got {style!r}")
+    if style == "hold":
+        return Protocol()
+    # A stroke: the cue moves for 1.2 s at the speeds of the recorded people's labels
+    # (data.import_shrec17: 0.12 m/s, 0.6 rad/s, 0.2 s ramps, about 1.1-2.5 s strokes), and the
+    # clip is shorter; the shifted labels (0.55 s) still end within it.
+    return Protocol(clip_s=3.0, cue_start_s=0.5, cue_end_s=1.7, cue_ramp_s=0.2, cue_speed_m_s=0.12,
+                    cue_rate_rad_s=0.6, style="stroke")
 
 
 def motion_name(motions) -> str:
@@ -145,8 +174,12 @@ class CueView:
 # --------------------------------------------------------------------------- sessions
 
 
-def record_simulated(user_id: str, motions_list, population_seed: int, seed: int, user: str):
-    """The simulated person's clips for each cue: their gesture for the motion, their perception delay."""
+def record_simulated(user_id: str, motions_list, population_seed: int, seed: int, user: str,
+                     style: str = "hold"):
+    """The simulated person's clips for each cue: their gesture for the motion, their perception delay.
+
+    With `style="stroke"` the same person makes each motion as one stroke (`UserProfile.single_stroke`,
+    its return and speed drawn from a stream of their own)."""
     from rtcohand_drake.data.dataset import Clip
     from rtcohand_drake.data.population import GeneratorConfig, simulate_clip
     from rtcohand_drake.data.population.handler import integrate_pose
@@ -160,6 +193,11 @@ def record_simulated(user_id: str, motions_list, population_seed: int, seed: int
     index = list(ids).index(user_id)
     # The same person as the generated population's (the profile is the first draw of its stream).
     profile = make_user(config, user_id, ids[user_id], np.random.default_rng([int(population_seed), index]))
+    if style == "stroke":
+        stroke_rng = np.random.default_rng([int(population_seed), index, 2_000_003])
+        profile.single_stroke = True
+        profile.stroke_return = float(stroke_rng.uniform(*config.single_stroke_return))
+        profile.stroke_speed_gain = float(stroke_rng.uniform(*config.single_stroke_speed_gain))
     rng = np.random.default_rng([int(population_seed), index, 1_000_003, int(seed)])
     delay_range = PersonConfig().perception_delay_s
     clips = []
@@ -203,6 +241,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
 
     for k, motions in enumerate(motions_list):
         name = motion_name(motions)
+        print(f"  {name}: {PROMPTS[protocol.style]}", flush=True)
         for n in range(int(np.ceil(protocol.countdown_s)), 0, -1):
             print(f"  {name}: {n} ...", flush=True)
             if view is not None:
@@ -314,6 +353,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")
     p.add_argument("--marker-length-m", type=float, default=0.05, help="with --labels aruco: the marker's side")
     p.add_argument("--marker-id", type=int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
+    p.add_argument("--style", choices=STYLES, default="hold",
+                   help="hold: keep the motion going while the part should move; stroke: one short stroke")
     return p
 
 
@@ -323,7 +364,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not directory.is_dir():
         raise InputError(f"{args.out}: directory {directory} does not exist")
     motions_list = parse_only(args.only) if args.only else list(ONE_MOTIONS + TWO_MOTIONS)
-    protocol = Protocol()
+    protocol = protocol_for(args.style)
     print(f"recording {len(motions_list)} clips for {args.user}: "
           + ", ".join(motion_name(m) for m in motions_list), flush=True)
     if args.labels == "aruco" and args.simulated_user is not None:
@@ -333,8 +374,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.simulated_user is not None:
         if args.camera_calibration is not None:
             raise InputError("command line: --camera-calibration goes with --camera or --video")
-        clips = record_simulated(args.simulated_user, motions_list, args.population_seed, args.seed, args.user)
-        source = f"simulated-user {args.simulated_user} (population seed {args.population_seed}, seed {args.seed})"
+        clips = record_simulated(args.simulated_user, motions_list, args.population_seed, args.seed, args.user,
+                                 args.style)
+        source = (f"simulated-user {args.simulated_user} (population seed {args.population_seed}, seed {args.seed}, "
+                  f"style {args.style})")
     else:
         from rtcohand_drake.scenario import load_scenario
         from rtcohand_drake.systems.gestures.camera import make_tracker
@@ -379,7 +422,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if missing and not args.only:
         print("not recorded (no hand seen): " + ", ".join(missing))
     print(f"to record a motion again: python -m rtcohand_drake.record --out OTHER.h5 --user {args.user} "
-          "--only Tx+,Rz- (then give both files' clips as context)")
+          f"--style {args.style} --only Tx+,Rz- (then give both files' clips as context)")
     return 0
 
 

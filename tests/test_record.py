@@ -1,5 +1,7 @@
 """The recorder: a simulated person's session is a contract-valid dataset file with every one-motion clip."""
 
+from dataclasses import replace as dc_replace
+
 import h5py
 import numpy as np
 import pytest
@@ -114,3 +116,56 @@ def test_tracked_session_labels(labels):
 def test_aruco_labels_need_a_camera(tmp_path):
     with pytest.raises(InputError, match="--labels aruco needs"):
         main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--labels", "aruco"])
+
+
+def test_a_stroke_session_cues_strokes_and_says_so(tmp_path, capsys):
+    import json
+
+    from rtcohand_drake.record import protocol_for, record_tracked
+
+    stroke = protocol_for("stroke")
+    # The stroke cue: faster, and moving for 1.2 s rather than 2.5 s; the shifted labels end in the clip.
+    t = np.arange(0.0, stroke.clip_s, 0.01)
+    cue = cue_twist(((0, 1),), t, stroke)
+    moving = t[np.abs(cue[:, 0]) > 0.5 * stroke.cue_speed_m_s]
+    assert cue[:, 0].max() == pytest.approx(0.12) and moving[-1] - moving[0] == pytest.approx(1.0, abs=0.05)
+    assert stroke.cue_end_s + stroke.response_delay_s + stroke.label_lag_s < stroke.clip_s
+    hold = Protocol()
+    moving_hold = t[np.abs(cue_twist(((0, 1),), t, hold)[:, 0]) > 0.5 * hold.cue_speed_m_s]
+    assert moving_hold[-1] - moving_hold[0] > 1.5 * (moving[-1] - moving[0])
+    # A tracked stroke session prompts a stroke and labels each clip with the stroke cue.
+    clips = record_tracked(_FakeCamera(), [((5, -1),)], dc_replace(stroke, countdown_s=1.0), "ME", live=False)
+    assert "make one stroke" in capsys.readouterr().out
+    assert clips[0].object_velocity[:, 5].min() == pytest.approx(-0.6, rel=1e-3)
+    # A simulated session: the same person strokes, and the file records the style.
+    out = tmp_path / "strokes.h5"
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
+                 "--style", "stroke", "--only", "Tx+"]) == 0
+    held = tmp_path / "held.h5"
+    main(["--out", str(held), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check", "--only", "Tx+"])
+    with h5py.File(out) as f:
+        assert json.loads(f.attrs["recorder"])["protocol"]["style"] == "stroke"
+    # The same person's hand, stroking: it comes partly back, so its net move along x is shorter than
+    # when the motion is held (and both go the cued way).
+    a, b = read_dataset(out)[0], read_dataset(held)[0]
+    net = lambda c: float(np.nanmean(c.keypoints[-5:, 0, 0]) - np.nanmean(c.keypoints[:5, 0, 0]))  # noqa: E731
+    assert 0 < net(a) < 0.6 * net(b)
+
+
+def test_the_reading_check_advises_by_style(tmp_path, capsys, monkeypatch):
+    from rtcohand_drake.analysis import context_reading
+
+    for style in ("stroke", "hold"):
+        out = tmp_path / f"{style}.h5"
+        main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
+              "--style", style, "--only", "Tx+,Tx-,Rz+,Rz-"])
+        assert context_reading.recording_style(out) == style
+    # The advice for a motion read by its shape alone depends on the style recorded: the verdicts
+    # are forced here (a motion read by the nearest-neighbour reference and not by the policy).
+    monkeypatch.setattr(context_reading, "WEAK", 2.0)  # every motion counts as poorly read by the policy
+    monkeypatch.setattr(context_reading, "READS", -10.0)  # and as read by its shape
+    for style, expected in (("stroke", "--style hold --only"), ("hold", "rather than stroking out and back")):
+        context_reading.main(["--context-file", str(tmp_path / f"{style}.h5"), "--context-user", "ME"])
+        assert expected in capsys.readouterr().out
+    with pytest.raises(InputError, match="--style"):
+        main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--style", "wave"])

@@ -49,6 +49,13 @@ STROKE_ADVICE = ("read by its shape but not by the policy: {motions}. These gest
                  "the course of the stroke, and the policy reads the hand's motion while the part should "
                  "move: keep moving or turning the hand for as long as the part should, rather than "
                  "stroking out and back")
+# The same, for a person who recorded strokes on purpose (`record --style stroke`): the policy reads
+# the hand's motion while the part should move, which a stroke shows only while it lasts.
+STROKE_STYLE_ADVICE = ("read by its shape but not by the policy: {motions}. You recorded these as strokes, "
+                       "and the policy reads the hand's motion while the part should move, which a stroke "
+                       "shows only while it lasts: record them again with the motion held "
+                       "(python -m rtcohand_drake.record --style hold --only {only}), or make each stroke "
+                       "last as long as the part should move")
 ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
 
 
@@ -198,6 +205,22 @@ def motion_table(readings: Sequence[ClipReading]) -> list[tuple[str, int, float,
     return rows
 
 
+def recording_style(path: Path) -> str:
+    """How the file's person gestured: the recorder's `protocol.style` ("hold" or "stroke"); "hold"
+    for files the recorder did not write or written before the style was recorded."""
+    import json
+
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            recorder = f.attrs.get("recorder")
+        protocol = json.loads(recorder).get("protocol", {}) if recorder is not None else {}
+    except (OSError, ValueError, AttributeError):
+        return "hold"
+    return protocol.get("style", "hold") if isinstance(protocol, dict) else "hold"
+
+
 def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[LabelledClip], str]:
     from rtcohand_drake.data.dataset import DatasetError, load_policy_clips
 
@@ -333,7 +356,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     shape = reference_gains[labels[1]]
     by_shape = [name for name in poor if shape.get(name, float("nan")) >= READS]
     unread = [name for name in poor if name not in by_shape]
-    if by_shape:
+    style = recording_style(args.context_file) if args.context_file is not None else "hold"
+    if by_shape and style == "stroke":
+        print(STROKE_STYLE_ADVICE.format(motions=", ".join(by_shape), only=",".join(by_shape)))
+    elif by_shape:
         print(STROKE_ADVICE.format(motions=", ".join(by_shape)))
     if unread:
         print(POOR_ADVICE.format(motions=", ".join(unread)))
