@@ -224,7 +224,6 @@ def plot(results: dict, conditions: Sequence[str], cap_s: float, out: Path) -> N
         ax2.plot(range(len(conditions)), [np.nan if t is None else t for t in times], color="C0", alpha=0.25, lw=0.8,
                  marker=".")
     ax2.set_xticks(range(len(conditions)), conditions)
-    ax2.set_yscale("log")
     ax2.set_ylabel("person's mean completion time (s)")
     ax2.set_title("paired: one line per person")
     fig.tight_layout()
