@@ -232,3 +232,18 @@ def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsy
     assert [c["condition"] for c in data["comparisons"]] == ["intent"]
     assert (out / "study.png").stat().st_size > 0
     assert "Engine: in-process" in text
+
+
+@needs_dask
+def test_address_joins_an_existing_cluster(tmp_path):
+    # A cluster started elsewhere (here: in this test, as `dask scheduler` / `dask worker` would);
+    # the study's runs go to it by its address, and the cluster outlives them.
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        report = run_tasks(study.run_condition, [(("p101", "intent"), (101, "u10", "intent", str(tmp_path), 0, 1.0))],
+                           address=cluster.scheduler_address, progress=False)
+        assert report.engine == f"dask ({cluster.scheduler_address})" and report.workers == 1
+        assert report.outcomes[0].ok and report.outcomes[0].value["completed"] is False
+        with Client(cluster.scheduler_address) as client:  # still up, its worker still there
+            assert len(client.scheduler_info()["workers"]) == 1
