@@ -232,6 +232,16 @@ def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsy
     assert [c["condition"] for c in data["comparisons"]] == ["intent"]
     assert (out / "study.png").stat().st_size > 0
     assert "Engine: in-process" in text
+    # --resume: the runs with a log are summarised, not run again; only the failed person's runs are.
+    logs = out / "logs"
+    stamp = {p.name: p.stat().st_mtime_ns for p in logs.glob("*.h5")}
+    assert sorted(stamp) == ["p101_u10_intent_s0.h5", "p101_u10_joystick_s0.h5"]
+    status = study.main(["--populations", "101", "--users", "u10", "u99", "--conditions", "joystick", "intent",
+                         "--cap", "1", "--workers", "0", "--bootstrap", "200", "--out", str(out), "--resume"])
+    assert status == 1 and {p.name: p.stat().st_mtime_ns for p in logs.glob("*.h5")} == stamp
+    again = json.loads((out / "study.json").read_text())
+    assert again["results"]["p101/u10"] == data["results"]["p101/u10"]
+    assert "2 more runs summarised from earlier logs" in (out / "study.md").read_text()
 
 
 @needs_dask

@@ -122,6 +122,8 @@ def run_tasks(fn: Callable, tasks: Sequence[tuple[Hashable, tuple]], *, workers:
 
     `fn` must be a function of an importable module (workers import it by name).
     """
+    if not tasks:
+        return EngineReport("nothing to run", 0, 0.0, [])
     keys = [k for k, _ in tasks]
     if len(set(keys)) != len(keys):
         raise ValueError("run_tasks: task keys must be unique")

@@ -42,6 +42,7 @@ import dataclasses as dc
 import contextlib
 import io
 import json
+import sys
 from pathlib import Path
 from typing import Sequence
 
@@ -256,6 +257,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--logs", type=Path, default=None, help="where the run logs go (default: OUT/logs)")
     p.add_argument("--summarise-only", action="store_true",
                    help="run nothing: summarise the run logs already in the logs folder")
+    p.add_argument("--resume", action="store_true",
+                   help="summarise the runs whose logs are already in the logs folder, run only the others")
     args = p.parse_args(argv)
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
     from rtcohand_drake.scenario import load_scenario
@@ -269,22 +272,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     keys = [(pop, user, c, seed) for pop in populations for user in args.users for seed in seeds
             for c in args.conditions]
     engine_line = ""
-    if args.summarise_only:
-        outcomes = []
+    done = {}
+    if args.summarise_only or args.resume:
         for key in keys:
             path = logs / log_name(*key)
             if path.is_file():
-                outcomes.append(Outcome(key, {**summarise(str(path)), "log": str(path)}, attempts=1))
+                try:
+                    done[key] = Outcome(key, {**summarise(str(path)), "log": str(path)}, attempts=1)
+                except Exception as err:  # an unreadable log: reported, and run again with --resume
+                    print(f"note: {path.name}: cannot be read ({type(err).__name__}); "
+                          + ("running it again" if args.resume else "left out"), file=sys.stderr)
+    if args.summarise_only:
+        outcomes = [done[k] for k in keys if k in done]
     else:
         def describe(o: Outcome) -> str:
             pop, user, c, seed = o.key
             state = f"{o.value['completion_s']:.1f} s" if o.value["completed"] else f"not done ({o.value['faces']}/6)"
             return f"population {pop} {user} {c} run seed {seed}: {state} ({o.seconds:.0f} s wall)"
 
-        report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap)) for k in keys],
+        todo = [k for k in keys if k not in done]
+        if done:
+            print(f"resuming: {len(done)} runs already in {logs}, {len(todo)} to run", file=sys.stderr)
+        report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap)) for k in todo],
                            workers=args.workers, address=args.address, label="study", describe=describe)
-        outcomes = report.outcomes
-        engine_line = engine_summary(report)
+        ran = {o.key: o for o in report.outcomes}
+        outcomes = [done.get(k) or ran[k] for k in keys]
+        engine_line = engine_summary(report) + (f" ({len(done)} more runs summarised from earlier logs.)"
+                                                if done else "")
     results, failed = collect(outcomes, args.conditions)
     table = markdown(results, args.conditions, cap, failed, args.bootstrap, engine_line)
     print(table)
