@@ -170,9 +170,10 @@ def comparisons(results: dict, conditions: Sequence[str], cap_s: float, n_boot: 
     return [compare(results, a, b, cap_s, n_boot=n_boot) for a, b in COMPARISONS if a in conditions and b in conditions]
 
 
-def markdown(results: dict, conditions: Sequence[str], cap_s: float, failed: Sequence[dict] = (),
-             n_boot: int = 10000, engine_line: str = "") -> str:
-    """Per person and run seed, the time (faces) and median speeds; then the paired comparisons."""
+def markdown(results: dict, conditions: Sequence[str], cap_s: float, compared: Sequence = (),
+             failed: Sequence[dict] = (), engine_line: str = "") -> str:
+    """Per person and run seed, the time (faces) and median speeds; then the paired comparisons
+    (`comparisons`' result)."""
     lines = ["| person | run seed | " + " | ".join(f"{c}: time (faces), median v / w" for c in conditions) + " |",
              "|---|---|" + "---|" * len(conditions)]
     for person, runs in results.items():
@@ -192,7 +193,7 @@ def markdown(results: dict, conditions: Sequence[str], cap_s: float, failed: Seq
             lines.append(f"| {person} | {seed} | " + " | ".join(cells) + " |")
     lines += ["", f"Paired ratios of completion time, per person (mean over run seeds; a run not finished "
                   f"counts as the cap, {cap_s:g} s):", ""]
-    lines += [c.line() for c in comparisons(results, conditions, cap_s, n_boot)]
+    lines += [c.line() for c in compared]
     lines.append(f"- the paper's gesture / joystick ratio: {PAPER_RATIO[0]} +- {PAPER_RATIO[1]}")
     if failed:
         lines += ["", f"Runs failed with an error after a retry ({len(failed)}):", ""]
@@ -300,14 +301,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         engine_line = engine_summary(report) + (f" ({len(done)} more runs summarised from earlier logs.)"
                                                 if done else "")
     results, failed = collect(outcomes, args.conditions)
-    table = markdown(results, args.conditions, cap, failed, args.bootstrap, engine_line)
+    compared = comparisons(results, args.conditions, cap, args.bootstrap)  # bootstrap once, for both files
+    table = markdown(results, args.conditions, cap, compared, failed, engine_line)
     print(table)
     (args.out / "study.md").write_text(table)
     summary = {"populations": populations, "run_seeds": seeds, "cap_s": cap, "conditions": args.conditions,
                "results": {person: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
                            for person, by_c in results.items()},
                "failed": failed,
-               "comparisons": [dc.asdict(c) for c in comparisons(results, args.conditions, cap, args.bootstrap)]}
+               "comparisons": [dc.asdict(c) for c in compared]}
     (args.out / "study.json").write_text(json.dumps(summary, indent=1))
     plot(results, args.conditions, cap, args.out / "study.png")
     print(f"wrote {args.out / 'study.md'}, study.json and study.png")
