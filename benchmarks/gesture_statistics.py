@@ -19,7 +19,10 @@ from the raw keypoints at the file's own frame rate (no resampling):
   against the hand);
 - jitter: the median, over clips, of the 99th percentile of the single-frame
   speed minus the smoothed speed (m/s), and the share of clips with a
-  single-frame speed above 2 m/s.
+  single-frame speed above 2 m/s;
+- steadiness: the palm centre's distance from the median of the 5 frames
+  around it (mm), its median and 99th percentile over the gesture's frames
+  (how still the tracker holds a hand frame to frame, and how far it glitches).
 
 Each statistic is the median over clips (and its 25-75 % range), except
 has_fast_frame, the share of clips. Writes
@@ -51,6 +54,12 @@ def smooth(p: np.ndarray, n: int = SMOOTH_FRAMES) -> np.ndarray:
     return np.stack([np.convolve(padded[:, d], kernel, mode="valid") for d in range(p.shape[1])], 1)
 
 
+def median_of_frames(p: np.ndarray, n: int = SMOOTH_FRAMES) -> np.ndarray:
+    """Each frame's median over the n frames centred on it (the ends repeated)."""
+    padded = np.concatenate([np.repeat(p[:1], n // 2, 0), p, np.repeat(p[-1:], n // 2, 0)])
+    return np.median(np.stack([padded[i:i + len(p)] for i in range(n)]), axis=0)
+
+
 def clip_statistics(keypoints: np.ndarray, labels: np.ndarray, fps: float) -> dict | None:
     size = np.abs(np.asarray(labels, np.float64)).max(1)
     on = np.flatnonzero(size > ACTIVE_SHARE * size.max())
@@ -68,6 +77,7 @@ def clip_statistics(keypoints: np.ndarray, labels: np.ndarray, fps: float) -> di
     excursion = np.linalg.norm(palm_s - palm_s[0], axis=1)
     largest = excursion.max()
     tips = smooth(kp[:, TIPS].reshape(len(kp), -1) - np.repeat(palm, 5, 1).reshape(len(kp), -1)).reshape(len(kp), 5, 3)
+    steadiness = np.linalg.norm(palm - median_of_frames(palm), axis=1)
     tip_speed = np.median(np.linalg.norm(np.diff(tips, axis=0), axis=2).mean(1)) * fps
     return {
         "duration_s": on.size / fps,
@@ -77,6 +87,8 @@ def clip_statistics(keypoints: np.ndarray, labels: np.ndarray, fps: float) -> di
         "fingers_over_palm": float(tip_speed / max(np.median(speed), 1e-6)),
         "jitter_p99_m_s": float(np.percentile(np.abs(raw_speed - speed), 99)),
         "has_fast_frame": float(np.any(raw_speed > FAST_M_S)),
+        "steady_p50_mm": float(np.median(steadiness) * 1000),
+        "steady_p99_mm": float(np.percentile(steadiness, 99) * 1000),
     }
 
 

@@ -193,3 +193,46 @@ def test_single_stroke_users_stroke_out_and_back_and_others_are_drawn_as_before(
     for c, tr in zip(clips, truths):  # the label still asks for the motion over the whole stroke
         d = int(c.active_dims[0])
         assert np.abs(tr.intent[tr.envelope > 0.9, d]).min() > 0
+
+
+def test_tracking_glitches_shift_the_hand_on_a_few_frames_and_change_nothing_else():
+    """`glitch_prob`: over a few frames the whole hand is off by a size within `glitch_m`; the labels,
+    the clean hand and the other frames are as without glitches (the glitches are drawn last)."""
+    quiet = replace(CONFIG, jitter_m=0.0, dropout_prob=0.0, burst_prob=0.0)
+    glitchy = replace(quiet, glitch_prob=0.05, glitch_m=(0.01, 0.04), glitch_frames=(1, 3), glitch_keypoint_share=0.0)
+    _, plain, plain_truths = simulate_user(quiet, 2, "in-sample", seed=3)
+    _, clips, truths = simulate_user(glitchy, 2, "in-sample", seed=3)
+    # The first clip is drawn from the same draws up to its glitches.
+    np.testing.assert_array_equal(clips[0].object_velocity, plain[0].object_velocity)
+    np.testing.assert_array_equal(truths[0].keypoints_clean, plain_truths[0].keypoints_clean)
+    shifted = []
+    for c, tr in zip(clips, truths):
+        offset = c.keypoints.astype(np.float64) - tr.keypoints_clean
+        moved = np.abs(offset).max(axis=(1, 2)) > 1e-5
+        # With no keypoint share, every keypoint of a glitched frame moves by the same vector.
+        np.testing.assert_allclose(offset[moved], np.repeat(offset[moved][:, :1], 21, axis=1), atol=1e-5)
+        shifted.append(np.linalg.norm(offset[moved][:, 0], axis=1))
+        assert moved.mean() < 0.5
+    sizes = np.concatenate(shifted)
+    assert sizes.size > 0
+    # One glitch is 0.01-0.04 m; two that overlap add up to at most twice that.
+    assert sizes.min() > 0.01 - 1e-5 and sizes.max() < 0.08 + 1e-5
+    assert np.mean(sizes < 0.04 + 1e-5) > 0.8
+
+
+def test_recorded_tracking_preset_is_what_generate_writes(tmp_path):
+    """`generate --recorded-tracking` applies RECORDED_TRACKING and writes it in the file's generator record."""
+    import json
+
+    import h5py
+
+    from rtcohand_drake.data.generate import main
+    from rtcohand_drake.data.population.config import RECORDED_TRACKING
+
+    out = tmp_path / "rt.h5"
+    assert main(["--out", str(out), "--users", "1", "--seed", "2", "--recorded-tracking", "--quiet"]) == 0
+    with h5py.File(out, "r") as f:
+        generator = json.loads(f.attrs["generator"])
+    for key, value in RECORDED_TRACKING.items():
+        assert generator[key] == (list(value) if isinstance(value, tuple) else value)
+    assert generator["glitch_prob"] > 0 and generator["jitter_m"] < CONFIG.jitter_m

@@ -1,7 +1,7 @@
 """Generate a simulated gesture dataset (docs/interfaces.md, the gesture dataset file).
 
     python -m rtcohand_drake.data.generate --out PATH.h5 [--users 15] [--seed N] [--fps 30]
-        [--single-stroke-share P]
+        [--single-stroke-share P] [--recorded-tracking]
 
 Bad arguments or an unwritable output exit with status 2 and one line on stderr.
 """
@@ -15,6 +15,7 @@ from dataclasses import replace
 
 from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
+from rtcohand_drake.data.population.config import RECORDED_TRACKING
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,10 +54,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--single-stroke-share", type=_share, default=GeneratorConfig.p_single_stroke,
                         help="share of users who make each move or turn as one stroke out and partly back, "
                              "as recorded people do (default 0)")
+    parser.add_argument("--recorded-tracking", action="store_true",
+                        help="track the hands as recorded people's were: steadier frame to frame, with glitches of "
+                             "centimetres now and then (GeneratorConfig's RECORDED_TRACKING; default: the "
+                             "simulated camera's Gaussian jitter)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     args = parser.parse_args(argv)
 
-    config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share)
+    config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share,
+                     **(RECORDED_TRACKING if args.recorded_tracking else {}))
     start = time.perf_counter()
 
     def progress(done: int, total: int, user) -> None:

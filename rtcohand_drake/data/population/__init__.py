@@ -196,6 +196,8 @@ def simulate_clip(
     keypoints[lost] = np.nan
 
     velocity, intent = handler_labels(config, user, motions, envs, intensity, t, rng)
+    if config.glitch_prob > 0.0:  # drawn last, so a population without glitches is drawn as before
+        add_tracking_glitches(keypoints, config, rng)
     pose = integrate_pose(np.asarray(config.object_start_position_m), velocity, dt)
     return (
         keypoints.astype(np.float32),
@@ -203,6 +205,21 @@ def simulate_clip(
         pose.astype(np.float32),
         ClipTruth(keypoints_clean=clean, intent=intent, envelope=a_max),
     )
+
+
+def add_tracking_glitches(keypoints: np.ndarray, config: GeneratorConfig, rng: np.random.Generator) -> None:
+    """Shifts `keypoints` (N, 21, 3) in place over the frames where the tracker glitches
+    (`GeneratorConfig.glitch_*`): the whole hand by one vector of a log-uniform size in a random
+    direction, and each keypoint by its own share of that size."""
+    N = len(keypoints)
+    lo, hi = config.glitch_m
+    for start in np.flatnonzero(rng.random(N) < config.glitch_prob):
+        frames = slice(start, start + int(rng.integers(config.glitch_frames[0], config.glitch_frames[1] + 1)))
+        size = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+        direction = rng.normal(size=3)
+        direction /= max(np.linalg.norm(direction), 1e-12)
+        own = rng.normal(0.0, config.glitch_keypoint_share * size / np.sqrt(3), size=keypoints.shape[1:])
+        keypoints[frames] += size * direction + own
 
 
 def simulate_user(
