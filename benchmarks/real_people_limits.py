@@ -12,11 +12,21 @@ commanding zero twist, the metric of `evaluate`:
 - **where the error sits**, for each per-person reference: before the
   gesture, in its first 0.5 s, later in the gesture, and after it;
 - **whole-gesture nearest neighbour**: the share of held-out clips whose
-  nearest context clip (the path of the mean of the 21 keypoints from the gesture's start,
-  resampled to 15 points, after a 5-frame median filter of the raw
-  keypoints) has the same command. It sees the whole gesture at once, so it
-  bounds what the hand data tell about the gesture, not what a causal read
-  can do in time.
+  nearest context clip has the same command, described two ways, both
+  resampled to 15 points of the gesture after a 5-frame median filter of
+  the raw keypoints: the hand's path (the mean of the 21 keypoints from the
+  gesture's start), and the path with the hand's shape (the 21 keypoints
+  about their mean, in the user frame). It sees the whole gesture at once,
+  so it tells what the hand data say about the gesture, not what a causal
+  read can do in time.
+
+- **a nearest-neighbour read of the hand's path and shape**: the
+  nearest-neighbour reference again, causal, at the policy's rate, but on
+  the keypoints instead of the 36 hand-part velocities: at each step, the
+  21 keypoints (5-frame median filtered) now and 0.4, 0.8, 1.2 and 1.6 s
+  before, all about the hand's centre now (k = 5; lags and k chosen on the
+  development people). What the policy's input leaves out: the hand's
+  shape, and where it is against where it was.
 
 Writes DIR/real_people_limits.json when --out is given.
 """
@@ -65,13 +75,17 @@ def error_by_phase(episodes, make) -> dict:
     return {k: float(v / zero) for k, v in parts.items()}
 
 
-def hand_path(clip, points: int = 15) -> np.ndarray:
+def hand_path(clip, points: int = 15, shape: bool = False) -> np.ndarray:
+    """The gesture's path (points x 3), and with `shape` the hand's shape about its centre (points x 63)."""
     on = np.flatnonzero(np.abs(clip.object_velocity).max(1) > 0)
     kp = np.asarray(clip.keypoints[on[0]:on[-1] + 1], np.float64)
     kp = np.stack([np.median(kp[max(0, i - 2):i + 3], 0) for i in range(len(kp))])
-    path = kp.mean(1)
-    path = path - path[0]
-    return path[np.linspace(0, len(path) - 1, points).round().astype(int)].reshape(-1)
+    at = np.linspace(0, len(kp) - 1, points).round().astype(int)
+    centre = kp.mean(1)
+    path = (centre - centre[0])[at].reshape(-1)
+    if not shape:
+        return path
+    return np.concatenate([path, (kp - centre[:, None])[at].reshape(-1)])
 
 
 def command_of(clip) -> tuple[int, int]:
@@ -80,7 +94,7 @@ def command_of(clip) -> tuple[int, int]:
     return d, int(np.sign(total[d]))
 
 
-def whole_gesture_accuracy(path: Path) -> float:
+def whole_gesture_accuracy(path: Path, shape: bool = False) -> float:
     from rtcohand_drake.data.dataset import read_dataset
 
     clips = [c for c in read_dataset(path) if c.object_velocity is not None]
@@ -90,11 +104,58 @@ def whole_gesture_accuracy(path: Path) -> float:
         test = [c for c in clips if c.user == user and c.split == "test"]
         if not train:
             continue
-        keys = np.stack([hand_path(c) for c in train])
+        keys = np.stack([hand_path(c, shape=shape) for c in train])
         for c in test:
-            nearest = train[int(np.argmin(((keys - hand_path(c)) ** 2).sum(1)))]
+            nearest = train[int(np.argmin(((keys - hand_path(c, shape=shape)) ** 2).sum(1)))]
             hits.append(command_of(nearest) == command_of(c))
     return float(np.mean(hits))
+
+
+TRAJECTORY_LAGS = (0, 4, 8, 12, 16)  # policy steps
+TRAJECTORY_K = 5
+
+
+def hand_trajectory(clip, steps: int) -> np.ndarray:
+    """(steps, 63 x lags): the filtered keypoints at each policy step and TRAJECTORY_LAGS before, about
+    the hand's centre at that step."""
+    from rtcohand_drake.data.dataset import resample
+
+    kp = np.asarray(clip.keypoints, np.float64)
+    kp = np.stack([np.median(kp[max(0, i - 2):i + 3], 0) for i in range(len(kp))])
+    at_rate, _ = resample(kp.reshape(len(kp), -1), clip.times, RATE_HZ)
+    at_rate = at_rate[:steps].reshape(-1, 21, 3)
+    centre = at_rate.mean(1)[:, None]
+    n = len(at_rate)
+    return np.concatenate([(at_rate[np.maximum(np.arange(n) - lag, 0)] - centre).reshape(n, -1)
+                           for lag in TRAJECTORY_LAGS], 1)
+
+
+def trajectory_knn_share(path: Path) -> float:
+    """The share of zero twist of the path-and-shape nearest-neighbour read, on the Person protocol."""
+    import torch
+
+    from rtcohand_drake.data.dataset import read_dataset, to_policy_clip
+
+    clips = [c for c in read_dataset(path) if c.object_velocity is not None]
+    error = zero = 0.0
+    for user in sorted({c.user for c in clips}):
+        def described(c):
+            y = np.nan_to_num(to_policy_clip(c, RATE_HZ).labels.astype(np.float64))
+            return hand_trajectory(c, len(y)), y
+        train = [described(c) for c in clips if c.user == user and c.split == "train"]
+        if not train:
+            continue
+        keys = torch.from_numpy(np.concatenate([x for x, _ in train]))
+        labels = np.concatenate([y for _, y in train])
+        for c in clips:
+            if c.user != user or c.split != "test":
+                continue
+            x, y = described(c)
+            nearest = torch.topk(torch.cdist(torch.from_numpy(x), keys), min(TRAJECTORY_K, len(keys)),
+                                 largest=False).indices.numpy()
+            error += np.mean((labels[nearest].mean(1) - y) ** 2)
+            zero += np.mean(y ** 2)
+    return float(error / zero)
 
 
 def main(argv=None) -> int:
@@ -122,14 +183,19 @@ def main(argv=None) -> int:
                 episodes, lambda: KnnReference(*args.knn)),
         },
         "whole_gesture_nearest_neighbour_accuracy": whole_gesture_accuracy(args.data),
+        "whole_gesture_nearest_neighbour_accuracy_with_shape": whole_gesture_accuracy(args.data, shape=True),
+        "path_and_shape_nearest_neighbours": trajectory_knn_share(args.data),
     }
     print(f"{args.data}: {len(episodes)} held-out clips")
     print("late oracle (share of zero twist): " + ", ".join(
         f"knows the command {k} after the label starts {v:.3f}" for k, v in result["late_oracle"].items()))
     for name, parts in result["error_by_phase"].items():
         print(f"{name}: total {sum(parts.values()):.3f} = " + " + ".join(f"{v:.3f} {k}" for k, v in parts.items()))
+    print(f"nearest neighbours of the hand's path and shape (k {TRAJECTORY_K}): "
+          f"{result['path_and_shape_nearest_neighbours']:.3f} of zero twist")
     print(f"whole-gesture nearest neighbour names the command of "
-          f"{100 * result['whole_gesture_nearest_neighbour_accuracy']:.0f} % of the held-out clips")
+          f"{100 * result['whole_gesture_nearest_neighbour_accuracy']:.0f} % of the held-out clips by the hand's path, "
+          f"{100 * result['whole_gesture_nearest_neighbour_accuracy_with_shape']:.0f} % by its path and shape")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "real_people_limits.json").write_text(json.dumps(result, indent=1))
