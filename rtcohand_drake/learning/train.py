@@ -164,10 +164,12 @@ def validation_batch(clips: Sequence, cfg: TrainConfig) -> Optional[Batch]:
 
 
 def init_distributed() -> tuple:
-    """(rank, world_size, device); initialises the process group under torchrun."""
+    """(rank, world_size, device); initialises the process group under torchrun.
+
+    One process trains on the GPU when torch sees one, else on the CPU."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
-        return 0, 1, torch.device("cpu")
+        return 0, 1, torch.device("cuda") if torch.cuda.is_available() else torch.device("cpu")
     import torch.distributed as dist
 
     use_cuda = torch.cuda.is_available()
@@ -310,7 +312,7 @@ def train(cfg: TrainConfig, data: str, out: str, model_config: Optional[Dict] = 
 def validate(model: nn.Module, batch: Batch) -> Dict[str, float]:
     """Free-running (no teacher forcing) loss and MSE of the mean with z from q(z|C)."""
     model.eval()
-    g = torch.Generator().manual_seed(0)
+    g = torch.Generator(device=batch.y.device).manual_seed(0)
     terms = model(batch, p_tf=0.0, sample_posterior=True, generator=g)
     pred = model.predict(batch)
     m = batch.mask.to(pred["mean"].dtype)

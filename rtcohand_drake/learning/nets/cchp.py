@@ -595,7 +595,7 @@ class Cchp(nn.Module):
         if z_from == "prior_mean":
             z = ctx.z_mu
         elif z_from == "prior_sample":
-            z = ctx.z_mu + ctx.z_sigma * torch.randn(ctx.z_mu.shape, generator=generator)
+            z = ctx.z_mu + ctx.z_sigma * torch.randn(ctx.z_mu.shape, generator=generator, device=ctx.z_mu.device)
         else:
             raise ValueError(f"unknown z_from {z_from!r}")
         mean, std, attn = self.decode(self.normalizer_x(batch.x), ctx, z, keep_attention=keep_attention)
