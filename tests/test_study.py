@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -214,6 +215,14 @@ def test_a_run_that_raises_is_retried_once_then_reported(tmp_path, workers):
     assert not bad.ok and bad.attempts == 2 and "unknown user 'u99'" in bad.error
     assert good.ok and good.attempts == 1 and good.value["completed"] is False
     assert report.failed == [bad]
+    # Each run reports its process's peak resident memory (a worker's grows with its runs: docs/studies.md).
+    assert good.peak_memory_gb > 0.05 and report.peak_memory_gb() == max(
+        o.peak_memory_gb for o in report.outcomes if o.peak_memory_gb is not None)
+    if workers == 0:  # this process: no more than the kernel's own high-water mark, read after the run
+        status = Path("/proc/self/status")
+        if status.exists():
+            hwm_kb = int(next(line.split()[1] for line in status.read_text().splitlines() if line.startswith("VmHWM:")))
+            assert good.peak_memory_gb <= hwm_kb / 1e6 + 1e-9
 
 
 def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsys):
@@ -231,7 +240,7 @@ def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsy
     assert data["results"]["p101/u99"]["intent"]["0"] is None
     assert [c["condition"] for c in data["comparisons"]] == ["intent"]
     assert (out / "study.png").stat().st_size > 0
-    assert "Engine: in-process" in text
+    assert "Engine: in-process" in text and "largest peak memory of a process that ran them:" in text
     # --resume: the runs with a log are summarised, not run again; only the failed person's runs are.
     logs = out / "logs"
     stamp = {p.name: p.stat().st_mtime_ns for p in logs.glob("*.h5")}

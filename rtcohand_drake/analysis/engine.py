@@ -43,6 +43,7 @@ class Outcome:
     error: str | None = None
     attempts: int = 0
     seconds: float = 0.0  # wall time of the successful (or last) attempt
+    peak_memory_gb: float | None = None  # the peak resident memory of the process that ran it, after it ran
 
     @property
     def ok(self) -> bool:
@@ -62,16 +63,34 @@ class EngineReport:
     def failed(self) -> list[Outcome]:
         return [o for o in self.outcomes if not o.ok]
 
+    def peak_memory_gb(self) -> float | None:
+        """The largest peak resident memory of a process that ran a task (None where unknown).
+
+        A worker's memory grows with the runs it has done: Drake 1.51.1 never frees a Python
+        LeafSystem that declares ports or events (docs/studies.md)."""
+        values = [o.peak_memory_gb for o in self.outcomes if o.peak_memory_gb is not None]
+        return max(values) if values else None
+
     def throughput_per_worker_h(self) -> float:
         """Tasks completed per worker-hour over the whole wall time (start-up included)."""
         done = sum(o.ok for o in self.outcomes)
         return done / max(self.workers, 1) / max(self.wall_s, 1e-9) * 3600.0
 
 
-def _timed(fn: Callable, args: tuple) -> tuple[Any, float]:
+def _timed(fn: Callable, args: tuple) -> tuple[Any, float, float | None]:
+    """(value, wall seconds, the process's peak resident memory in GB after the task)."""
     t0 = time.perf_counter()
     value = fn(*args)
-    return value, time.perf_counter() - t0
+    return value, time.perf_counter() - t0, _peak_memory_gb()
+
+
+def _peak_memory_gb() -> float | None:
+    try:
+        import resource
+    except ImportError:  # not a Unix
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # kB on Linux, bytes on macOS
+    return peak / (1e9 if sys.platform == "darwin" else 1e6)
 
 
 def _one_line(err: BaseException) -> str:
@@ -153,7 +172,7 @@ def _run_here(fn: Callable, tasks, bar: _Progress) -> list[Outcome]:
             outcome.attempts = attempt
             t0 = time.perf_counter()
             try:
-                outcome.value, outcome.seconds = _timed(fn, tuple(args))
+                outcome.value, outcome.seconds, outcome.peak_memory_gb = _timed(fn, tuple(args))
                 outcome.error = None
                 break
             except Exception as err:  # reported, retried once
@@ -193,7 +212,7 @@ def _run_dask(fn: Callable, tasks, bar: _Progress, workers: int, address: str | 
             outcome = outcomes[key]
             outcome.attempts = attempt
             try:
-                outcome.value, outcome.seconds = future.result()
+                outcome.value, outcome.seconds, outcome.peak_memory_gb = future.result()
                 outcome.error = None
             except Exception as err:
                 outcome.error = _one_line(err)

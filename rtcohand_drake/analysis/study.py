@@ -325,6 +325,9 @@ def engine_summary(report, projections: Sequence[int] = (16, 64, 256)) -> str:
     if per_worker_h > 0:
         text += "; the same runs would take, at that rate, " + ", ".join(
             f"{len(report.outcomes) / (per_worker_h * w) * 60:.1f} min on {w}" for w in projections) + " workers"
+    memory = report.peak_memory_gb()
+    if memory is not None:
+        text += f"; largest peak memory of a process that ran them: {memory:.2f} GB"
     return text + "."
 
 
