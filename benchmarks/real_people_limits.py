@@ -26,7 +26,11 @@ commanding zero twist, the metric of `evaluate`:
   21 keypoints (5-frame median filtered) now and 0.4, 0.8, 1.2 and 1.6 s
   before, all about the hand's centre now (k = 5; lags and k chosen on the
   development people). What the policy's input leaves out: the hand's
-  shape, and where it is against where it was.
+  shape, and where it is against where it was;
+- **a ridge read of the hand's path and shape**: the same features,
+  standardised by the person's context, read linearly (lambda chosen on the
+  development people): whether a linear read, as the policy's, gains from
+  the hand's shape.
 
 Writes DIR/real_people_limits.json when --out is given.
 """
@@ -130,31 +134,58 @@ def hand_trajectory(clip, steps: int) -> np.ndarray:
                            for lag in TRAJECTORY_LAGS], 1)
 
 
+def _person_trajectories(path: Path):
+    """Per person with context: (context [(trajectory, labels)], held-out [(trajectory, labels)])."""
+    from rtcohand_drake.data.dataset import read_dataset, to_policy_clip
+
+    clips = [c for c in read_dataset(path) if c.object_velocity is not None]
+
+    def described(c):
+        y = np.nan_to_num(to_policy_clip(c, RATE_HZ).labels.astype(np.float64))
+        return hand_trajectory(c, len(y)), y
+
+    for user in sorted({c.user for c in clips}):
+        train = [described(c) for c in clips if c.user == user and c.split == "train"]
+        if train:
+            yield train, [described(c) for c in clips if c.user == user and c.split == "test"]
+
+
 def trajectory_knn_share(path: Path) -> float:
     """The share of zero twist of the path-and-shape nearest-neighbour read, on the Person protocol."""
     import torch
 
-    from rtcohand_drake.data.dataset import read_dataset, to_policy_clip
-
-    clips = [c for c in read_dataset(path) if c.object_velocity is not None]
     error = zero = 0.0
-    for user in sorted({c.user for c in clips}):
-        def described(c):
-            y = np.nan_to_num(to_policy_clip(c, RATE_HZ).labels.astype(np.float64))
-            return hand_trajectory(c, len(y)), y
-        train = [described(c) for c in clips if c.user == user and c.split == "train"]
-        if not train:
-            continue
+    for train, test in _person_trajectories(path):
         keys = torch.from_numpy(np.concatenate([x for x, _ in train]))
         labels = np.concatenate([y for _, y in train])
-        for c in clips:
-            if c.user != user or c.split != "test":
-                continue
-            x, y = described(c)
+        for x, y in test:
             nearest = torch.topk(torch.cdist(torch.from_numpy(x), keys), min(TRAJECTORY_K, len(keys)),
                                  largest=False).indices.numpy()
             error += np.mean((labels[nearest].mean(1) - y) ** 2)
             zero += np.mean(y ** 2)
+    return float(error / zero)
+
+
+TRAJECTORY_RIDGE_LAMBDA = 1000.0  # chosen on the development people (1, 3, 10, ..., 100000)
+
+
+def trajectory_ridge_share(path: Path, lam: float = TRAJECTORY_RIDGE_LAMBDA) -> float:
+    """The share of zero twist of a ridge read of the same path-and-shape features, fitted to each person:
+    a linear read, as the policy's own, on an input that carries the hand's shape. The features are
+    standardised by the person's context; lambda is on that scale; the bias is not penalised."""
+    error = zero = 0.0
+    for train, test in _person_trajectories(path):
+        x = np.concatenate([a for a, _ in train])
+        y = np.concatenate([b for _, b in train])
+        mean, std = x.mean(0), x.std(0) + 1e-6
+        design = np.hstack([(x - mean) / std, np.ones((len(x), 1))])
+        penalty = lam * np.eye(design.shape[1])
+        penalty[-1, -1] = 0.0
+        weights = np.linalg.solve(design.T @ design + penalty, design.T @ y)
+        for a, b in test:
+            pred = np.hstack([(a - mean) / std, np.ones((len(a), 1))]) @ weights
+            error += np.mean((pred - b) ** 2)
+            zero += np.mean(b ** 2)
     return float(error / zero)
 
 
@@ -168,6 +199,8 @@ def main(argv=None) -> int:
     p.add_argument("--data", required=True, type=Path)
     p.add_argument("--ridge", nargs=2, type=float, default=[30, 3000], metavar=("WINDOW", "LAMBDA"))
     p.add_argument("--knn", nargs=2, type=int, default=[20, 20], metavar=("WINDOW", "K"))
+    p.add_argument("--trajectory-lambda", type=float, default=TRAJECTORY_RIDGE_LAMBDA,
+                   help="the path-and-shape ridge's lambda (on features standardised by the person's context)")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(argv)
     episodes = evaluation_episodes(load_clips(str(args.data), RATE_HZ), "Person", 0)
@@ -185,6 +218,7 @@ def main(argv=None) -> int:
         "whole_gesture_nearest_neighbour_accuracy": whole_gesture_accuracy(args.data),
         "whole_gesture_nearest_neighbour_accuracy_with_shape": whole_gesture_accuracy(args.data, shape=True),
         "path_and_shape_nearest_neighbours": trajectory_knn_share(args.data),
+        "path_and_shape_ridge": trajectory_ridge_share(args.data, args.trajectory_lambda),
     }
     print(f"{args.data}: {len(episodes)} held-out clips")
     print("late oracle (share of zero twist): " + ", ".join(
@@ -193,6 +227,8 @@ def main(argv=None) -> int:
         print(f"{name}: total {sum(parts.values()):.3f} = " + " + ".join(f"{v:.3f} {k}" for k, v in parts.items()))
     print(f"nearest neighbours of the hand's path and shape (k {TRAJECTORY_K}): "
           f"{result['path_and_shape_nearest_neighbours']:.3f} of zero twist")
+    print(f"ridge on the hand's path and shape (lambda {args.trajectory_lambda:g}): "
+          f"{result['path_and_shape_ridge']:.3f} of zero twist")
     print(f"whole-gesture nearest neighbour names the command of "
           f"{100 * result['whole_gesture_nearest_neighbour_accuracy']:.0f} % of the held-out clips by the hand's path, "
           f"{100 * result['whole_gesture_nearest_neighbour_accuracy_with_shape']:.0f} % by its path and shape")

@@ -243,3 +243,34 @@ def test_context_reading_split_protocol_reads_the_held_out_clips(natural):
     # A file with no test clips cannot be read this way: one line, status 2.
     run = _run("rtcohand_drake.context_reading", "--user", "u10", "--protocol", "split")
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1 and "split" in run.stderr
+
+
+def _limits_benchmark():
+    import importlib.util
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "real_people_limits.py"
+    spec = importlib.util.spec_from_file_location("real_people_limits", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_path_and_shape_ridge_matches_independent_limits(natural):
+    """The benchmark's ridge read of the hand's path and shape: under a huge lambda it falls to each
+    person's mean context label (computed here on its own), and a moderate lambda reads the written
+    gestures better than that."""
+    limits = _limits_benchmark()
+    clips = [c for c in read_dataset(natural) if c.object_velocity is not None]
+    error = zero = 0.0
+    for user in sorted({c.user for c in clips}):
+        context = [_labels_at_policy_rate(c) for c in clips if c.user == user and c.split == "train"]
+        mean = np.concatenate(context).mean(0)
+        for c in clips:
+            if c.user == user and c.split == "test":
+                y = _labels_at_policy_rate(c)
+                error += np.mean((mean - y) ** 2)
+                zero += np.mean(y ** 2)
+    assert zero > 0
+    expected = error / zero
+    assert limits.trajectory_ridge_share(natural, lam=1e12) == pytest.approx(expected, rel=1e-4)
+    assert limits.trajectory_ridge_share(natural, lam=1.0) < expected
