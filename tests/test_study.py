@@ -266,3 +266,20 @@ def test_address_joins_an_existing_cluster(tmp_path):
         assert report.outcomes[0].ok and report.outcomes[0].value["completed"] is False
         with Client(cluster.scheduler_address) as client:  # still up, its worker still there
             assert len(client.scheduler_info()["workers"]) == 1
+
+
+@needs_dask
+def test_runs_per_worker_restarts_the_workers_between_batches():
+    # os.getpid as the task: which process ran it. With one run per worker and 2 workers, the second
+    # batch runs in fresh processes; with no restarts, the 4 runs share the 2 workers.
+    import os
+
+    tasks = [(i, ()) for i in range(4)]
+    recycled = run_tasks(os.getpid, tasks, workers=2, progress=False, runs_per_worker=1)
+    assert all(o.ok for o in recycled.outcomes)
+    first, second = {o.value for o in recycled.outcomes[:2]}, {o.value for o in recycled.outcomes[2:]}
+    assert first.isdisjoint(second) and os.getpid() not in first | second
+    kept = run_tasks(os.getpid, tasks, workers=2, progress=False)
+    assert len({o.value for o in kept.outcomes}) <= 2
+    with pytest.raises(ValueError, match="runs_per_worker"):
+        run_tasks(os.getpid, tasks, workers=2, progress=False, runs_per_worker=-1)

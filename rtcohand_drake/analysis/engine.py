@@ -22,6 +22,12 @@ a cluster. Ray would do the same with a much larger install and start-up.
 A task that raises is retried once (a fresh attempt, possibly on another
 worker); if it raises again it is reported with its error, never dropped.
 Progress (done, failed, and an estimate of the time left) goes to stderr.
+
+With `runs_per_worker=N` on Dask, the tasks run in batches of N per worker,
+and the workers are restarted (fresh processes) between batches: a worker's
+memory grows with the runs it has done (Drake 1.51.1 never frees a Python
+LeafSystem with ports or events), and each task reports its process's peak
+memory to size N by.
 """
 
 from __future__ import annotations
@@ -136,7 +142,7 @@ class _Progress:
 
 def run_tasks(fn: Callable, tasks: Sequence[tuple[Hashable, tuple]], *, workers: int = 2, address: str | None = None,
               label: str = "runs", progress: bool = True,
-              describe: Callable[[Outcome], str] | None = None) -> EngineReport:
+              describe: Callable[[Outcome], str] | None = None, runs_per_worker: int = 0) -> EngineReport:
     """Run `fn(*args)` for each `(key, args)` of `tasks` (module docstring); outcomes in task order.
 
     `fn` must be a function of an importable module (workers import it by name).
@@ -146,6 +152,8 @@ def run_tasks(fn: Callable, tasks: Sequence[tuple[Hashable, tuple]], *, workers:
     keys = [k for k, _ in tasks]
     if len(set(keys)) != len(keys):
         raise ValueError("run_tasks: task keys must be unique")
+    if runs_per_worker < 0:
+        raise ValueError("run_tasks: runs_per_worker must be 0 (no restarts) or more")
     t0 = time.perf_counter()
     bar = _Progress(len(tasks), label, progress, describe)
     try:
@@ -157,7 +165,7 @@ def run_tasks(fn: Callable, tasks: Sequence[tuple[Hashable, tuple]], *, workers:
             outcomes = _run_here(fn, tasks, bar)
             engine, n_workers = "in-process", 1
         else:
-            outcomes, n_workers = _run_dask(fn, tasks, bar, workers, address)
+            outcomes, n_workers = _run_dask(fn, tasks, bar, workers, address, runs_per_worker)
             engine = f"dask ({address})" if address else f"dask local cluster"
     finally:
         bar.close()
@@ -184,10 +192,38 @@ def _run_here(fn: Callable, tasks, bar: _Progress) -> list[Outcome]:
     return outcomes
 
 
-def _run_dask(fn: Callable, tasks, bar: _Progress, workers: int, address: str | None) -> tuple[list[Outcome], int]:
+def _run_dask_batch(client, fn: Callable, tasks, outcomes: dict, index: dict, bar: _Progress) -> None:
+    from distributed import as_completed
+
+    args_of = dict(tasks)
+    # pure=False: a retry is a new task, not the cached failure.
+    futures = {client.submit(_timed, fn, tuple(args), key=f"run-{index[key]}-a1", pure=False): (key, 1)
+               for key, args in tasks}
+    pending = as_completed(list(futures))
+    for future in pending:
+        key, attempt = futures.pop(future)
+        outcome = outcomes[key]
+        outcome.attempts = attempt
+        try:
+            outcome.value, outcome.seconds, outcome.peak_memory_gb = future.result()
+            outcome.error = None
+        except Exception as err:
+            outcome.error = _one_line(err)
+            if attempt <= RETRIES:
+                bar.retrying(key, outcome.error)
+                retry = client.submit(_timed, fn, tuple(args_of[key]), key=f"run-{index[key]}-a{attempt + 1}",
+                                      pure=False)
+                futures[retry] = (key, attempt + 1)
+                pending.add(retry)
+                continue
+        bar.finished(outcome)
+
+
+def _run_dask(fn: Callable, tasks, bar: _Progress, workers: int, address: str | None,
+              runs_per_worker: int = 0) -> tuple[list[Outcome], int]:
     import logging
 
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
 
     # The cluster's own chatter (ports, nanny restarts) would bury the progress lines.
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker"):
@@ -201,29 +237,12 @@ def _run_dask(fn: Callable, tasks, bar: _Progress, workers: int, address: str | 
     try:
         n_workers = max(len(client.scheduler_info().get("workers", {})), 1)
         outcomes = {key: Outcome(key) for key, _ in tasks}
-        args_of = dict(tasks)
-        # pure=False: a retry is a new task, not the cached failure.
-        futures = {client.submit(_timed, fn, tuple(args), key=f"run-{i}-a1", pure=False): (key, 1)
-                   for i, (key, args) in enumerate(tasks)}
         index = {key: i for i, (key, _) in enumerate(tasks)}
-        pending = as_completed(list(futures))
-        for future in pending:
-            key, attempt = futures.pop(future)
-            outcome = outcomes[key]
-            outcome.attempts = attempt
-            try:
-                outcome.value, outcome.seconds, outcome.peak_memory_gb = future.result()
-                outcome.error = None
-            except Exception as err:
-                outcome.error = _one_line(err)
-                if attempt <= RETRIES:
-                    bar.retrying(key, outcome.error)
-                    retry = client.submit(_timed, fn, tuple(args_of[key]), key=f"run-{index[key]}-a{attempt + 1}",
-                                          pure=False)
-                    futures[retry] = (key, attempt + 1)
-                    pending.add(retry)
-                    continue
-            bar.finished(outcome)
+        size = runs_per_worker * n_workers if runs_per_worker > 0 else len(tasks)
+        for start in range(0, len(tasks), size):
+            if start > 0:  # fresh worker processes: what the last batch's runs left in memory goes
+                client.restart(wait_for_workers=True)
+            _run_dask_batch(client, fn, tasks[start:start + size], outcomes, index, bar)
         return [outcomes[key] for key, _ in tasks], n_workers
     finally:
         client.close()

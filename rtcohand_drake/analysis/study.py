@@ -253,6 +253,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--workers", "--jobs", type=int, default=2,
                    help="local cluster worker processes; 0 runs in this process")
     p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
+    p.add_argument("--runs-per-worker", type=int, default=0,
+                   help="restart the Dask workers after this many runs each (0: never); a worker's memory grows "
+                        "by about 14 MB a run (docs/studies.md)")
     p.add_argument("--bootstrap", type=int, default=10000, help="bootstrap resamples for the intervals")
     p.add_argument("--out", type=Path, default=Path("docs/results/study"))
     p.add_argument("--logs", type=Path, default=None, help="where the run logs go (default: OUT/logs)")
@@ -261,6 +264,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--resume", action="store_true",
                    help="summarise the runs whose logs are already in the logs folder, run only the others")
     args = p.parse_args(argv)
+    if args.runs_per_worker < 0:
+        p.error("--runs-per-worker must be 0 (never restart) or more")
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
     from rtcohand_drake.scenario import load_scenario
 
@@ -295,7 +300,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if done:
             print(f"resuming: {len(done)} runs already in {logs}, {len(todo)} to run", file=sys.stderr)
         report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap)) for k in todo],
-                           workers=args.workers, address=args.address, label="study", describe=describe)
+                           workers=args.workers, address=args.address, label="study", describe=describe,
+                           runs_per_worker=args.runs_per_worker)
         ran = {o.key: o for o in report.outcomes}
         outcomes = [done.get(k) or ran[k] for k in keys]
         engine_line = engine_summary(report) + (f" ({len(done)} more runs summarised from earlier logs.)"
