@@ -30,7 +30,10 @@ commanding zero twist, the metric of `evaluate`:
 - **a ridge read of the hand's path and shape**: the same features,
   standardised by the person's context, read linearly (lambda chosen on the
   development people): whether a linear read, as the policy's, gains from
-  the hand's shape.
+  the hand's shape;
+- **a kernel ridge read of the hand's path and shape**: the same features
+  under a Gaussian kernel (bandwidth and lambda chosen on the development
+  people): a nonlinear read of the kind of the paper's attention.
 
 Writes DIR/real_people_limits.json when --out is given.
 """
@@ -189,6 +192,36 @@ def trajectory_ridge_share(path: Path, lam: float = TRAJECTORY_RIDGE_LAMBDA) -> 
     return float(error / zero)
 
 
+TRAJECTORY_KERNEL = (0.5, 0.3)  # (bandwidth / median distance, lambda), chosen on the development people
+# (bandwidths 0.25-1.0 x the median distance, lambda 0.1-10)
+
+
+def trajectory_kernel_share(path: Path, scale: float = TRAJECTORY_KERNEL[0], lam: float = TRAJECTORY_KERNEL[1]) -> float:
+    """The share of zero twist of a kernel ridge read of the same path-and-shape features, fitted to each
+    person: a Gaussian kernel over the features standardised by the person's context, its bandwidth
+    `scale` times the median distance between the context's steps; the labels' context mean is the
+    read with no evidence (a read of the kind of the paper's attention, nonlinear in the features)."""
+    import torch
+
+    error = zero = 0.0
+    for train, test in _person_trajectories(path):
+        x = np.concatenate([a for a, _ in train])
+        y = np.concatenate([b for _, b in train])
+        mean, std = x.mean(0), x.std(0) + 1e-6
+        keys = torch.from_numpy((x - mean) / std)
+        distance = torch.cdist(keys, keys)
+        width = scale * float(distance[distance > 0].median())
+        gram = torch.exp(-distance ** 2 / (2 * width ** 2)).numpy()
+        offset = y.mean(0)
+        weights = np.linalg.solve(gram + lam * np.eye(len(gram)), y - offset)
+        for a, b in test:
+            near = torch.cdist(torch.from_numpy((a - mean) / std), keys)
+            pred = offset + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
+            error += np.mean((pred - b) ** 2)
+            zero += np.mean(b ** 2)
+    return float(error / zero)
+
+
 def main(argv=None) -> int:
     from rtcohand_drake.data.sampling import evaluation_episodes
     from rtcohand_drake.learning.knn_reference import KnnReference
@@ -219,6 +252,7 @@ def main(argv=None) -> int:
         "whole_gesture_nearest_neighbour_accuracy_with_shape": whole_gesture_accuracy(args.data, shape=True),
         "path_and_shape_nearest_neighbours": trajectory_knn_share(args.data),
         "path_and_shape_ridge": trajectory_ridge_share(args.data, args.trajectory_lambda),
+        "path_and_shape_kernel": trajectory_kernel_share(args.data),
     }
     print(f"{args.data}: {len(episodes)} held-out clips")
     print("late oracle (share of zero twist): " + ", ".join(
@@ -229,6 +263,8 @@ def main(argv=None) -> int:
           f"{result['path_and_shape_nearest_neighbours']:.3f} of zero twist")
     print(f"ridge on the hand's path and shape (lambda {args.trajectory_lambda:g}): "
           f"{result['path_and_shape_ridge']:.3f} of zero twist")
+    print(f"kernel ridge on the hand's path and shape (bandwidth {TRAJECTORY_KERNEL[0]:g} x the median distance, "
+          f"lambda {TRAJECTORY_KERNEL[1]:g}): {result['path_and_shape_kernel']:.3f} of zero twist")
     print(f"whole-gesture nearest neighbour names the command of "
           f"{100 * result['whole_gesture_nearest_neighbour_accuracy']:.0f} % of the held-out clips by the hand's path, "
           f"{100 * result['whole_gesture_nearest_neighbour_accuracy_with_shape']:.0f} % by its path and shape")

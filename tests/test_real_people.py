@@ -256,9 +256,9 @@ def _limits_benchmark():
 
 
 def test_path_and_shape_ridge_matches_independent_limits(natural):
-    """The benchmark's ridge read of the hand's path and shape: under a huge lambda it falls to each
-    person's mean context label (computed here on its own), and a moderate lambda reads the written
-    gestures better than that."""
+    """The benchmark's ridge and kernel reads of the hand's path and shape: under a huge lambda each
+    falls to each person's mean context label (computed here on its own), and a moderate lambda reads
+    the written gestures better than that."""
     limits = _limits_benchmark()
     clips = [c for c in read_dataset(natural) if c.object_velocity is not None]
     error = zero = 0.0
@@ -274,3 +274,6 @@ def test_path_and_shape_ridge_matches_independent_limits(natural):
     expected = error / zero
     assert limits.trajectory_ridge_share(natural, lam=1e12) == pytest.approx(expected, rel=1e-4)
     assert limits.trajectory_ridge_share(natural, lam=1.0) < expected
+    # The kernel read likewise falls to the mean under a huge lambda, and reads better with a small one.
+    assert limits.trajectory_kernel_share(natural, lam=1e12) == pytest.approx(expected, rel=1e-4)
+    assert limits.trajectory_kernel_share(natural) < expected
