@@ -23,7 +23,7 @@ commanding zero twist, the metric of `evaluate`:
 - **a nearest-neighbour read of the hand's path and shape**: the
   nearest-neighbour reference again, causal, at the policy's rate, but on
   the keypoints instead of the 36 hand-part velocities: at each step, the
-  21 keypoints (5-frame median filtered) now and 0.4, 0.8, 1.2 and 1.6 s
+  21 keypoints (the median of each frame and the 4 before) now and 0.4, 0.8, 1.2 and 1.6 s
   before, all about the hand's centre now (k = 5; lags and k chosen on the
   development people). What the policy's input leaves out: the hand's
   shape, and where it is against where it was;
@@ -124,11 +124,11 @@ TRAJECTORY_K = 5
 
 def hand_trajectory(clip, steps: int) -> np.ndarray:
     """(steps, 63 x lags): the filtered keypoints at each policy step and TRAJECTORY_LAGS before, about
-    the hand's centre at that step."""
+    the hand's centre at that step. The filter is causal: the median of each frame and the 4 before."""
     from rtcohand_drake.data.dataset import resample
 
     kp = np.asarray(clip.keypoints, np.float64)
-    kp = np.stack([np.median(kp[max(0, i - 2):i + 3], 0) for i in range(len(kp))])
+    kp = np.stack([np.median(kp[max(0, i - 4):i + 1], 0) for i in range(len(kp))])
     at_rate, _ = resample(kp.reshape(len(kp), -1), clip.times, RATE_HZ)
     at_rate = at_rate[:steps].reshape(-1, 21, 3)
     centre = at_rate.mean(1)[:, None]
