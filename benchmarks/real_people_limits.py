@@ -153,20 +153,39 @@ def _person_trajectories(path: Path):
             yield train, [described(c) for c in clips if c.user == user and c.split == "test"]
 
 
+def _read_share(path: Path, fit) -> float:
+    """The share of zero twist of a read fitted to each person's context, on the Person protocol.
+
+    `fit(features, labels)` gets the person's context steps and returns `predict(features)`."""
+    error = zero = 0.0
+    for train, test in _person_trajectories(path):
+        predict = fit(np.concatenate([x for x, _ in train]), np.concatenate([y for _, y in train]))
+        for x, y in test:
+            error += np.mean((predict(x) - y) ** 2)
+            zero += np.mean(y ** 2)
+    return float(error / zero)
+
+
+def _standardiser(x: np.ndarray):
+    """Scales features by the context's mean and spread."""
+    mean, std = x.mean(0), x.std(0) + 1e-6
+    return lambda a: (a - mean) / std
+
+
 def trajectory_knn_share(path: Path) -> float:
     """The share of zero twist of the path-and-shape nearest-neighbour read, on the Person protocol."""
     import torch
 
-    error = zero = 0.0
-    for train, test in _person_trajectories(path):
-        keys = torch.from_numpy(np.concatenate([x for x, _ in train]))
-        labels = np.concatenate([y for _, y in train])
-        for x, y in test:
-            nearest = torch.topk(torch.cdist(torch.from_numpy(x), keys), min(TRAJECTORY_K, len(keys)),
+    def fit(x, y):
+        keys = torch.from_numpy(x)
+
+        def predict(a):
+            nearest = torch.topk(torch.cdist(torch.from_numpy(a), keys), min(TRAJECTORY_K, len(keys)),
                                  largest=False).indices.numpy()
-            error += np.mean((labels[nearest].mean(1) - y) ** 2)
-            zero += np.mean(y ** 2)
-    return float(error / zero)
+            return y[nearest].mean(1)
+        return predict
+
+    return _read_share(path, fit)
 
 
 TRAJECTORY_RIDGE_LAMBDA = 1000.0  # chosen on the development people (1, 3, 10, ..., 100000)
@@ -176,20 +195,18 @@ def trajectory_ridge_share(path: Path, lam: float = TRAJECTORY_RIDGE_LAMBDA) -> 
     """The share of zero twist of a ridge read of the same path-and-shape features, fitted to each person:
     a linear read, as the policy's own, on an input that carries the hand's shape. The features are
     standardised by the person's context; lambda is on that scale; the bias is not penalised."""
-    error = zero = 0.0
-    for train, test in _person_trajectories(path):
-        x = np.concatenate([a for a, _ in train])
-        y = np.concatenate([b for _, b in train])
-        mean, std = x.mean(0), x.std(0) + 1e-6
-        design = np.hstack([(x - mean) / std, np.ones((len(x), 1))])
-        penalty = lam * np.eye(design.shape[1])
+    def fit(x, y):
+        scale = _standardiser(x)
+
+        def design(a):
+            return np.hstack([scale(a), np.ones((len(a), 1))])
+        d = design(x)
+        penalty = lam * np.eye(d.shape[1])
         penalty[-1, -1] = 0.0
-        weights = np.linalg.solve(design.T @ design + penalty, design.T @ y)
-        for a, b in test:
-            pred = np.hstack([(a - mean) / std, np.ones((len(a), 1))]) @ weights
-            error += np.mean((pred - b) ** 2)
-            zero += np.mean(b ** 2)
-    return float(error / zero)
+        weights = np.linalg.solve(d.T @ d + penalty, d.T @ y)
+        return lambda a: design(a) @ weights
+
+    return _read_share(path, fit)
 
 
 TRAJECTORY_KERNEL = (0.5, 0.3)  # (bandwidth / median distance, lambda), chosen on the development people
@@ -203,23 +220,21 @@ def trajectory_kernel_share(path: Path, scale: float = TRAJECTORY_KERNEL[0], lam
     read with no evidence (a read of the kind of the paper's attention, nonlinear in the features)."""
     import torch
 
-    error = zero = 0.0
-    for train, test in _person_trajectories(path):
-        x = np.concatenate([a for a, _ in train])
-        y = np.concatenate([b for _, b in train])
-        mean, std = x.mean(0), x.std(0) + 1e-6
-        keys = torch.from_numpy((x - mean) / std)
+    def fit(x, y):
+        standard = _standardiser(x)
+        keys = torch.from_numpy(standard(x))
         distance = torch.cdist(keys, keys)
         width = scale * float(distance[distance > 0].median())
         gram = torch.exp(-distance ** 2 / (2 * width ** 2)).numpy()
         offset = y.mean(0)
         weights = np.linalg.solve(gram + lam * np.eye(len(gram)), y - offset)
-        for a, b in test:
-            near = torch.cdist(torch.from_numpy((a - mean) / std), keys)
-            pred = offset + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
-            error += np.mean((pred - b) ** 2)
-            zero += np.mean(b ** 2)
-    return float(error / zero)
+
+        def predict(a):
+            near = torch.cdist(torch.from_numpy(standard(a)), keys)
+            return offset + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
+        return predict
+
+    return _read_share(path, fit)
 
 
 def main(argv=None) -> int:

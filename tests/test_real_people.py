@@ -245,21 +245,11 @@ def test_context_reading_split_protocol_reads_the_held_out_clips(natural):
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1 and "split" in run.stderr
 
 
-def _limits_benchmark():
-    import importlib.util
-
-    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "real_people_limits.py"
-    spec = importlib.util.spec_from_file_location("real_people_limits", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_path_and_shape_ridge_matches_independent_limits(natural):
+def test_path_and_shape_ridge_matches_independent_limits(natural, load_script):
     """The benchmark's ridge and kernel reads of the hand's path and shape: under a huge lambda each
     falls to each person's mean context label (computed here on its own), and a moderate lambda reads
     the written gestures better than that."""
-    limits = _limits_benchmark()
+    limits = load_script("benchmarks/real_people_limits.py")
     clips = [c for c in read_dataset(natural) if c.object_velocity is not None]
     error = zero = 0.0
     for user in sorted({c.user for c in clips}):

@@ -1,21 +1,11 @@
 """experiments/sweep_decodability.py: the feature sets it compares see what they are meant to."""
 
-import importlib.util
-import pathlib
-
 import numpy as np
 
 from rtcohand_drake.data.hand_features import hand_features
 from rtcohand_drake.data.population.hand_model import hand_keypoints_local
 
-SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "sweep_decodability.py"
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("sweep_decodability", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+SCRIPT = "experiments/sweep_decodability.py"
 
 
 def _rotations(rotvecs):
@@ -37,8 +27,8 @@ def _hand(n, abduction=0.0):
     return hand_keypoints_local(curl, ab, thumb, 1.0)
 
 
-def test_a_rigid_hand_moving_and_turning_shows_no_articulation():
-    m = _script()
+def test_a_rigid_hand_moving_and_turning_shows_no_articulation(load_script):
+    m = load_script(SCRIPT)
     fps, n = 30.0, 60
     t = np.arange(n) / fps
     shift = np.outer(0.1 * t, [1.0, -0.5, 0.2])[:, None, :]
@@ -58,8 +48,8 @@ def test_a_rigid_hand_moving_and_turning_shows_no_articulation():
         assert tips.shape == (len(x), 15) and np.abs(tips[1:]).max() < 1e-6  # still in the palm's frame
 
 
-def test_a_spread_shows_in_the_fingertips_and_its_sign_follows_the_spread():
-    m = _script()
+def test_a_spread_shows_in_the_fingertips_and_its_sign_follows_the_spread(load_script):
+    m = load_script(SCRIPT)
     fps, n = 30.0, 31
     ramp = np.linspace(0.0, 0.2, n)
     # Sideways (the palm's x) velocity of the index, middle and ring tips, for a spread each way.

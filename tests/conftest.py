@@ -1,0 +1,26 @@
+"""Shared fixtures."""
+
+import importlib.util
+import pathlib
+
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """Import a script of the repository that is not part of the package (benchmarks/, experiments/)
+    by its path from the repository's root; each is loaded once per session."""
+    loaded = {}
+
+    def load(relative: str):
+        if relative not in loaded:
+            path = REPO / relative
+            spec = importlib.util.spec_from_file_location(path.stem, path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            loaded[relative] = module
+        return loaded[relative]
+
+    return load
