@@ -218,23 +218,28 @@ def trajectory_kernel_share(path: Path, scale: float = TRAJECTORY_KERNEL[0], lam
     person: a Gaussian kernel over the features standardised by the person's context, its bandwidth
     `scale` times the median distance between the context's steps; the labels' context mean is the
     read with no evidence (a read of the kind of the paper's attention, nonlinear in the features)."""
+    return _read_share(path, lambda x, y: kernel_ridge_fit(x, y, scale, lam))
+
+
+def kernel_ridge_fit(x: np.ndarray, y: np.ndarray, scale: float = TRAJECTORY_KERNEL[0],
+                     lam: float = TRAJECTORY_KERNEL[1], standardise: bool = True):
+    """`predict(features)` of a Gaussian-kernel ridge fitted to (x, y): features standardised by x (unless
+    told not to), the bandwidth `scale` x the median distance between x's rows, the labels' mean the
+    read with no evidence."""
     import torch
 
-    def fit(x, y):
-        standard = _standardiser(x)
-        keys = torch.from_numpy(standard(x))
-        distance = torch.cdist(keys, keys)
-        width = scale * float(distance[distance > 0].median())
-        gram = torch.exp(-distance ** 2 / (2 * width ** 2)).numpy()
-        offset = y.mean(0)
-        weights = np.linalg.solve(gram + lam * np.eye(len(gram)), y - offset)
+    standard = _standardiser(x) if standardise else (lambda a: a)
+    keys = torch.from_numpy(standard(x))
+    distance = torch.cdist(keys, keys)
+    width = scale * float(distance[distance > 0].median())
+    gram = torch.exp(-distance ** 2 / (2 * width ** 2)).numpy()
+    mean = y.mean(0)
+    weights = np.linalg.solve(gram + lam * np.eye(len(gram)), y - mean)
 
-        def predict(a):
-            near = torch.cdist(torch.from_numpy(standard(a)), keys)
-            return offset + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
-        return predict
-
-    return _read_share(path, fit)
+    def predict(a):
+        near = torch.cdist(torch.from_numpy(standard(a)), keys)
+        return mean + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
+    return predict
 
 
 def main(argv=None) -> int:

@@ -102,6 +102,8 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         connect(supervisor.GetOutputPort(RESUME_COUNT), policy.GetInputPort(RESUME_COUNT))
         if policy.HasOutputPort(READ_VARIANCE):
             connect(policy.GetOutputPort(READ_VARIANCE), supervisor.GetInputPort(READ_VARIANCE))
+        if policy.HasInputPort(KEYPOINTS):  # a policy file that reads the hand's path and shape
+            connect(source.GetOutputPort(KEYPOINTS), policy.GetInputPort(KEYPOINTS))
         if policy.HasInputPort(INTENDED_TWIST) and source.HasOutputPort(INTENDED_TWIST):
             # A reference policy (analysis.reference_policies.IntentPolicy) reads what the simulated person means.
             connect(source.GetOutputPort(INTENDED_TWIST), policy.GetInputPort(INTENDED_TWIST))

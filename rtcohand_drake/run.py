@@ -125,6 +125,7 @@ def _build(args, scenario, meshcat, station=None):
         return build_run_diagram(scenario, source=setup.source, meshcat=meshcat, station=station,
                                  gesture_source=args.gesture_source), setup.end_time
     from rtcohand_drake.data.dataset import context_pieces, missing_motions
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.policy_file import load_policy
     from rtcohand_drake.systems.policy import CchpPolicy
 
@@ -133,10 +134,11 @@ def _build(args, scenario, meshcat, station=None):
     model.source_path = str(model_path)
     setup = make_gesture_source(args.gesture_source, args, scenario)
     rate = scenario.policy.rate_hz
+    path_shape = int(model.feature_dim) > FEATURE_DIM  # a policy file that reads the hand's path and shape
     if args.context_file is not None:
-        pieces, _ = context_pieces(args.context_file, args.context_user, rate)
+        pieces, _ = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
     elif setup.default_context is not None:
-        pieces = setup.default_context()
+        pieces = setup.default_context(path_shape=path_shape)
     else:
         raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
                          "(the user's own labelled clips)")

@@ -31,7 +31,7 @@ from typing import Iterable
 import numpy as np
 
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.data.hand_features import frame_times, hand_features, resample
+from rtcohand_drake.data.hand_features import frame_times, hand_features, path_shape_features, resample
 
 FORMAT = "rtcohand-gestures"
 VERSION = 1
@@ -90,7 +90,7 @@ class PolicyClip:
     group: str
     split: str
     active_dims: np.ndarray  # int
-    features: np.ndarray  # (T, 36) float32
+    features: np.ndarray  # (T, 36) float32; (T, 36 + PATH_SHAPE_DIM) with `to_policy_clip(path_shape=True)`
     valid: np.ndarray  # (T,) bool
     labels: np.ndarray | None  # (T, 6) float32, or None for an unlabelled stream
     rate_hz: float = 10.0
@@ -363,9 +363,14 @@ def _read_clip(path: Path, user: str, group: str, clip_id: str, cg) -> Clip:
 # --------------------------------------------------------------------------- policy rate
 
 
-def to_policy_clip(clip: Clip, rate_hz: float = 10.0) -> PolicyClip:
-    """Features and labels of a clip at the policy rate, on the same sample times."""
+def to_policy_clip(clip: Clip, rate_hz: float = 10.0, path_shape: bool = False) -> PolicyClip:
+    """Features and labels of a clip at the policy rate, on the same sample times.
+
+    With `path_shape` the features are the 36 hand-part velocities followed by the hand's path and
+    shape (`hand_features.path_shape_features`), the input of a policy file that reads them."""
     features, valid = hand_features(clip.keypoints, clip.fps, rate_hz, clip.timestamps)
+    if path_shape:
+        features = np.hstack([features, path_shape_features(clip.keypoints, clip.fps, rate_hz, clip.timestamps)])
     labels = None
     if clip.object_velocity is not None:
         labels, _ = resample(clip.object_velocity.astype(np.float64), clip.times, rate_hz)
@@ -383,9 +388,9 @@ def to_policy_clip(clip: Clip, rate_hz: float = 10.0) -> PolicyClip:
     )
 
 
-def load_policy_clips(path: str | os.PathLike, rate_hz: float = 10.0) -> list[PolicyClip]:
-    """Read and validate a dataset file, then convert every clip to the policy rate."""
-    return [to_policy_clip(c, rate_hz) for c in read_dataset(path)]
+def load_policy_clips(path: str | os.PathLike, rate_hz: float = 10.0, path_shape: bool = False) -> list[PolicyClip]:
+    """Read and validate a dataset file, then convert every clip to the policy rate (`to_policy_clip`)."""
+    return [to_policy_clip(c, rate_hz, path_shape) for c in read_dataset(path)]
 
 
 def find_clips(clips: Iterable, spec: str) -> list:
@@ -423,12 +428,13 @@ def _some(names: list[str], shown: int = 8) -> str:
     return ", ".join(names[:shown]) + more
 
 
-def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=()):
+def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=(), path_shape: bool = False):
     """A user's own labelled clips from a dataset file, as (features, labels) pieces, and the user.
 
-    `user` may be None when the file holds one user; clips named in `exclude` are left out.
+    `user` may be None when the file holds one user; clips named in `exclude` are left out;
+    `path_shape` appends the hand's path and shape to the features (`to_policy_clip`).
     """
-    clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
+    clips = [c for c in load_policy_clips(path, rate_hz, path_shape) if c.labels is not None]
     users = sorted({c.user for c in clips})
     if not clips:
         raise InputError(f"{path}: no labelled clips to use as context")

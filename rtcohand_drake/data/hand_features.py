@@ -321,3 +321,87 @@ class HandFeatureStream:
                     ok = True
         self._prev = (R, o, float(time_s)) if seen else None
         return x, ok
+
+
+# --------------------------------------------------------------------------- the hand's path and shape
+#
+# An extension of the input (docs/interfaces.md, the exported policy: `feature_dim` > 36), for a read
+# that tells gestures apart by the posture they are made in and the path the hand took, which the 36
+# velocities leave out (a one-finger gesture and the same gesture of the whole hand move alike).
+# At each policy step: the 21 keypoints now and PATH_SHAPE_LAGS_S before, each about the hand's
+# centre (the mean of the 21 keypoints) now, in metres in U, lag-major and row-major
+# (x[63 l + 3 k + a] = keypoint k, axis a, at lag l). `median` > 1 filters each sample by the median
+# of it and the samples before; the default (1) does not filter: on recorded development people a
+# median of 3 or 5 policy samples read worse (docs/real_people.md). Lags reaching before the first
+# sample take the first; a lost hand holds the last seen sample. The lags were chosen on recorded
+# development people.
+PATH_SHAPE_LAGS_S = (0.0, 0.4, 0.8, 1.2, 1.6)
+PATH_SHAPE_MEDIAN = 1
+PATH_SHAPE_DIM = NUM_KEYPOINTS * 3 * len(PATH_SHAPE_LAGS_S)
+
+
+class PathShapeStream:
+    """The hand's path and shape (PATH_SHAPE_DIM,) step by step: call :meth:`update` at the policy rate.
+
+    `update(keypoints (21, 3), NaN when lost)` returns (x float32, seen): `seen` is False until a
+    hand has been seen, and x is zeros then. Everything the stream remembers is the flat float
+    vector `state` (a Drake system keeps it as discrete state): [raw samples seen, filtered samples
+    seen, the newest `median` raw samples, the newest filtered samples (as many as the longest
+    lag needs), oldest first].
+    """
+
+    def __init__(self, rate_hz: float = 10.0, median: int = PATH_SHAPE_MEDIAN,
+                 lags_s: tuple = PATH_SHAPE_LAGS_S) -> None:
+        if not rate_hz > 0 or median < 1:
+            raise ValueError(f"rate_hz must be positive and median at least 1, got {rate_hz}, {median}")
+        self._lags = np.array([int(round(s * rate_hz)) for s in lags_s])
+        self._median = int(median)
+        self._kept = int(self._lags.max()) + 1
+        self.state = np.zeros(2 + 63 * (self._median + self._kept))
+
+    def reset(self) -> None:
+        self.state = np.zeros_like(self.state)
+
+    def update(self, keypoints: np.ndarray) -> tuple[np.ndarray, bool]:
+        kp = np.asarray(keypoints, dtype=np.float64).reshape(-1)
+        n_raw, n_kept = int(self.state[0]), int(self.state[1])
+        raw = self.state[2:2 + 63 * self._median].reshape(self._median, 63)
+        kept = self.state[2 + 63 * self._median:].reshape(self._kept, 63)
+        if kp.size != 63:
+            raise ValueError(f"keypoints must have 63 entries, got {kp.size}")
+        if np.isfinite(kp).all() or n_raw:
+            sample = kp if np.isfinite(kp).all() else raw[-1].copy()  # a lost hand holds the last sample
+            raw[:-1] = raw[1:].copy()
+            raw[-1] = sample
+            n_raw = min(n_raw + 1, self._median)
+        if not n_raw:
+            return np.zeros(PATH_SHAPE_DIM, np.float32), False
+        kept[:-1] = kept[1:].copy()
+        kept[-1] = np.median(raw[self._median - n_raw:], axis=0)
+        n_kept = min(n_kept + 1, self._kept)
+        self.state[0], self.state[1] = n_raw, n_kept
+        now = kept[-1].reshape(NUM_KEYPOINTS, 3)
+        centre = now.mean(axis=0)
+        x = np.concatenate([(kept[self._kept - 1 - min(lag, n_kept - 1)].reshape(NUM_KEYPOINTS, 3) - centre).reshape(-1)
+                            for lag in self._lags])
+        return x.astype(np.float32), True
+
+
+def path_shape_features(keypoints: np.ndarray, fps: float, rate_hz: float = 10.0,
+                        timestamps: np.ndarray | None = None, max_gap_s: float = DEFAULT_MAX_GAP_S,
+                        median: int = PATH_SHAPE_MEDIAN) -> np.ndarray:
+    """The hand's path and shape (T, PATH_SHAPE_DIM) float32 at the sample times of :func:`hand_features`.
+
+    The keypoints at each policy time are interpolated as there (a lost sample is held), then fed
+    through a :class:`PathShapeStream`, as a live source does one step at a time.
+    """
+    kp = np.asarray(keypoints)
+    if kp.ndim != 3 or kp.shape[1:] != (NUM_KEYPOINTS, 3):
+        raise ValueError(f"keypoints must have shape (N, 21, 3), got {kp.shape}")
+    times = frame_times(kp.shape[0], fps, timestamps)
+    kq, known = interpolate_keypoints(kp, times, policy_times(times, rate_hz), max(max_gap_s, 1.5 / float(fps)))
+    stream = PathShapeStream(rate_hz, median)
+    out = np.zeros((len(kq), PATH_SHAPE_DIM), np.float32)
+    for i, (k, ok) in enumerate(zip(kq, known)):
+        out[i] = stream.update(k if ok else np.full((NUM_KEYPOINTS, 3), np.nan))[0]
+    return out

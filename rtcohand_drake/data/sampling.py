@@ -227,9 +227,10 @@ class ContextSet:
 def pack_context(
     pieces: Sequence[Piece], max_len: int | None = None, drop_empty: bool = True, dtype=np.float32
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Context pieces [(features (T, 36), labels (T, 6)), ...] as one padded batch.
+    """Context pieces [(features (T, F), labels (T, 6)), ...] as one padded batch (F = 36, or more for a
+    policy that reads the hand's path and shape).
 
-    Returns x_c (P, T, 36), y_c (P, T, 6) and mask (P, T) bool (True on real
+    Returns x_c (P, T, F), y_c (P, T, 6) and mask (P, T) bool (True on real
     steps): a row per piece, zero-padded to the longest (or cut to ``max_len``
     steps, keeping the first ones). Non-finite values (frames where the hand
     was not seen) become 0. ``drop_empty`` leaves out zero-length pieces and
@@ -243,7 +244,8 @@ def pack_context(
     T = max((len(x) for x, _ in pieces), default=0)
     if max_len is not None:
         T = min(T, max_len)
-    x_c = np.zeros((len(pieces), T, FEATURE_DIM), dtype)
+    width = pieces[0][0].shape[1] if pieces and np.ndim(pieces[0][0]) == 2 else FEATURE_DIM  # 36, or more (path_shape)
+    x_c = np.zeros((len(pieces), T, width), dtype)
     y_c = np.zeros((len(pieces), T, 6), dtype)
     mask = np.zeros((len(pieces), T), bool)
     for b, (x, y) in enumerate(pieces):

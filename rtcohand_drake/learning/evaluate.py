@@ -41,6 +41,7 @@ import json
 import math
 import pathlib
 import sys
+import zipfile
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -128,6 +129,43 @@ def evaluate_episodes(model, episodes: Sequence, seed: int, features: Optional[L
     if keep_means:
         out["means"] = means
     return out
+
+
+@torch.no_grad()
+def stepped_policy_mse(module, episodes: Sequence) -> Dict:
+    """MSE of an exported policy file stepped as the policy box steps it: the context encoded once,
+    h, c and the previous mean starting at zero, the module's own mean fed back, z the mean of
+    q(z|C). For files that are not rebuilt as a training model (the path-and-shape read,
+    `learning.path_shape_policy`); the ELBO needs the training model and is not given."""
+    from rtcohand_drake.data.sampling import pack_context
+
+    H = int(module.hidden_size)
+    mses = []
+    for e in episodes:
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(e.context))
+        keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+        h, c, y_prev = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+        means = []
+        for x in np.nan_to_num(np.asarray(e.target_features, np.float32)):
+            y_prev, _, h, c, _ = module.step(torch.from_numpy(x), y_prev, h, c, keys, values, z_mu)
+            means.append(y_prev.numpy())
+        y = np.asarray(e.target.labels, np.float64)
+        mses.append(float(np.mean((y - np.array(means, np.float64)) ** 2)))
+    if not mses:
+        return {"elbo_loss": None, "mse": None, "episodes": 0}
+    return {"elbo_loss": None, "mse": float(np.mean(mses)), "episodes": len(mses)}
+
+
+def _path_shape_policy(path: str):
+    """The loaded policy file when it reads the hand's path and shape (feature_dim > 36), else None."""
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+    from rtcohand_drake.learning.policy_file import load_policy, torch_archive_kind
+
+    if pathlib.Path(path).is_file() and zipfile.is_zipfile(path) and torch_archive_kind(path, "policy") == "torchscript":
+        module = load_policy(path)
+        if int(module.feature_dim) > FEATURE_DIM:
+            return module
+    return None
 
 
 def zero_twist_mse(episodes: Sequence) -> Optional[float]:
@@ -377,21 +415,36 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
 
     if threads > 0:
         torch.set_num_threads(threads)
-    loaded = []
+    loaded, stepped = [], {}
     for i, ck in enumerate(checkpoints):
+        module = _path_shape_policy(ck)
+        if module is not None:  # stepped as the policy box steps it, on its wider input
+            from rtcohand_drake.learning.export import read_model_card
+
+            card = read_model_card(ck)
+            name = names[i] if names else "CCHP + path-and-shape read"
+            stepped[ck] = module
+            loaded.append((name, ck, None, card))
+            continue
         model, payload = load_model_file(ck, overrides)
         name = names[i] if names else model_name(payload)
         loaded.append((name, ck, model, payload))
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
     clips = load_clips(data, rate)
     episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
+    # The same episodes (same clips in the same order, same draws) on the wider input.
+    wide = {s: evaluation_episodes(load_clips(data, rate, path_shape=True), s, seed) for s in settings} if stepped else {}
     if max_episodes > 0:
         episodes = {s: e[:max_episodes] for s, e in episodes.items()}
+        wide = {s: e[:max_episodes] for s, e in wide.items()}
     per_model: Dict[str, Dict] = {}
     for name, ck, model, payload in loaded:
         entry = per_model.setdefault(name, {"checkpoints": [], "runs": []})
         entry["checkpoints"].append(str(ck))
-        run = {s: evaluate_episodes(model, episodes[s], seed) for s in settings}
+        if model is None:
+            run = {s: stepped_policy_mse(stepped[ck], wide[s]) for s in settings}
+        else:
+            run = {s: evaluate_episodes(model, episodes[s], seed) for s in settings}
         entry["runs"].append(run)
         entry.setdefault("train", []).append({"step": payload.get("step"), **payload.get("meta", {})})
         print(f"evaluated {name} ({ck}): " + ", ".join(
@@ -427,7 +480,9 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         levels = noise_levels()
         sw = {"levels": levels, "setting": "D+U+", "models": {}}
         for name in per_model:
-            runs = [(m) for n, _, m, _ in loaded if n == name]
+            runs = [m for n, _, m, _ in loaded if n == name and m is not None]
+            if not runs:  # a stepped policy file: the sweep needs the training model
+                continue
             mse_lv, el_lv, mse_sd, el_sd = [], [], [], []
             for li, (st, sr) in enumerate(levels):
                 feats = noisy_features(base, st, sr, seed)
@@ -447,6 +502,8 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
               "models": {}}
         for name in per_model:
             model = next(m for n, _, m, _ in loaded if n == name)  # first seed
+            if model is None:  # a stepped policy file: the spectrum needs the training model
+                continue
             powers, fracs = [], []
             for st, sr in levels:
                 feats = noisy_features(base, st, sr, seed)
@@ -458,7 +515,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         results["spectrum"] = sp
         plot_spectrum(sp, out_dir / "spectrum.png")
     if attention:
-        cchp = next(((n, m) for n, _, m, p in loaded if p["kind"] == "cchp"), None)
+        cchp = next(((n, m) for n, _, m, p in loaded if m is not None and p.get("kind") == "cchp"), None)
         eps = episodes.get("D+U+") or evaluation_episodes(clips, "D+U+", seed)
         if cchp is not None and eps:
             single = [e for e in eps if len(e.target.active_dims) == 1] or list(eps)

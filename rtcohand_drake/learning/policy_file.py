@@ -54,6 +54,9 @@ def load_policy(path: os.PathLike):
     for name in REQUIRED:
         if not hasattr(module, name):
             raise PolicyFileError(f"{path}: TorchScript module lacks {name!r} (not a CCHP policy export)")
-    if int(module.feature_dim) != 36:
-        raise PolicyFileError(f"{path}: policy reads {int(module.feature_dim)} features, the hand features are 36")
+    from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
+
+    if int(module.feature_dim) not in (FEATURE_DIM, FEATURE_DIM + PATH_SHAPE_DIM):
+        raise PolicyFileError(f"{path}: policy reads {int(module.feature_dim)} features; the hand features are "
+                              f"{FEATURE_DIM}, or {FEATURE_DIM + PATH_SHAPE_DIM} with the hand's path and shape")
     return module

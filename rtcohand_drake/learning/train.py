@@ -102,12 +102,12 @@ def parse_tf_schedule(text: str) -> str:
 # --------------------------------------------------------------------------- data
 
 
-def load_clips(path: str, rate_hz: float) -> list:
-    """Policy-rate clips of a dataset file; a broken file is an InputError naming it."""
+def load_clips(path: str, rate_hz: float, path_shape: bool = False) -> list:
+    """Policy-rate clips of a dataset file (`to_policy_clip`); a broken file is an InputError naming it."""
     from rtcohand_drake.data.dataset import DatasetError, load_policy_clips
 
     try:
-        clips = load_policy_clips(path, rate_hz=rate_hz)
+        clips = load_policy_clips(path, rate_hz=rate_hz, path_shape=path_shape)
     except DatasetError as err:
         raise InputError(str(err)) from None
     return clips

@@ -26,6 +26,11 @@ is always fed its own mean, as in training, whatever w is.
 Input ports
   gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)
   resume_count     (1)  optional; z is resampled when it changes
+  keypoints        (63) only for a policy file that reads the hand's path and shape
+                        (`feature_dim` = 36 + PATH_SHAPE_DIM, `learning.path_shape_policy`): the
+                        source's skeleton (NaN when lost), turned into that input by a
+                        `hand_features.PathShapeStream` whose memory is discrete state; the
+                        context pieces must then carry the same features (`to_policy_clip(path_shape=True)`)
 Output ports
   policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
@@ -44,10 +49,12 @@ import os
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM, PathShapeStream
 from rtcohand_drake.data.sampling import pack_context
+from rtcohand_drake.errors import InputError
 from rtcohand_drake.learning.policy_file import load_policy
-from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, POLICY_MEAN, POLICY_STD,
-                                       READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
+from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, KEYPOINTS, KEYPOINTS_DIM, POLICY_MEAN,
+                                       POLICY_STD, READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
 
 
 @dc.dataclass
@@ -94,6 +101,13 @@ class CchpPolicy(LeafSystem):
         # `step_read` (policy files exported with it) skips the pass over the context that only the
         # attention needs; its query gives the attention on demand (`attention_of`).
         self._has_read = hasattr(self.module, "step_read") and hasattr(self.module, "attention_of")
+        self.feature_dim = int(getattr(self.module, "feature_dim", FEATURE_DIM))
+        widths = {np.shape(x)[1] for x, _ in context_pieces if np.ndim(x) == 2}
+        if widths and widths != {self.feature_dim}:
+            raise InputError(f"{self.model_path or 'policy'}: reads {self.feature_dim} features per step, the "
+                             f"context pieces have {sorted(widths)}" + (
+                                 " (a policy that reads the hand's path and shape needs context clips loaded "
+                                 "with it: to_policy_clip(path_shape=True))" if self.feature_dim > FEATURE_DIM else ""))
         x_c, y_c, mask = pack_context(context_pieces)
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(
@@ -110,10 +124,18 @@ class CchpPolicy(LeafSystem):
         # TorchScript optimises a function on its first two calls (8-14 ms each here);
         # do that now, not inside the first policy periods of a real-time run.
         for _ in range(3):
-            self.step(np.zeros(36), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
+            self.step(np.zeros(self.feature_dim), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
 
         self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
         self._resume = self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
+        self._shape = None
+        if self.feature_dim > FEATURE_DIM:
+            if self.feature_dim != FEATURE_DIM + PATH_SHAPE_DIM:
+                raise InputError(f"{self.model_path}: reads {self.feature_dim} features; this box gives 36 or "
+                                 f"{FEATURE_DIM + PATH_SHAPE_DIM}")
+            self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
+            self._stream = PathShapeStream(rate_hz)
+            self._shape = self.DeclareDiscreteState(self._stream.state)
         self._h = self.DeclareDiscreteState(H)
         self._c = self.DeclareDiscreteState(H)
         self._y = self.DeclareDiscreteState(6)  # the module's own mean, fed back
@@ -170,15 +192,24 @@ class CchpPolicy(LeafSystem):
     def _update(self, context, discrete_state):
         get = lambda i: context.get_discrete_state(i).get_value()
         h, c, y_prev, z = get(self._h), get(self._c), get(self._y), get(self._z)
+        resumes_changed = False
         if self._resume.HasValue(context):
             resumes = float(self._resume.Eval(context)[0])
             if resumes != get(self._resumes)[0]:
+                resumes_changed = True
                 h, c, y_prev = np.zeros_like(h), np.zeros_like(c), np.zeros(6)
                 z = self.sample_z(int(resumes))
                 discrete_state.set_value(self._resumes, [resumes])
                 discrete_state.set_value(self._z, z)
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
+        if self._shape is not None:  # the hand's path and shape: a lost hand holds its last skeleton
+            self._stream.state = np.array(get(self._shape))
+            if resumes_changed:
+                self._stream.reset()
+            shape, _ = self._stream.update(self._keypoints.Eval(context))
+            discrete_state.set_value(self._shape, self._stream.state)
+            x = np.concatenate([x, shape])
         mean, std, h, c, read, v, query = self.step(x, y_prev, h, c, z)
         out = blended_output(mean, read, self.correction_weight)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))

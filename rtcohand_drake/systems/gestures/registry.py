@@ -29,7 +29,8 @@ class GestureSetup:
 
     source: object  # a LeafSystem with the gesture-source ports (or `twist_request` without a policy)
     # The user's own labelled clips as policy context when the run gives no --context-file:
-    # a callable returning [(features (T, 36), labels (T, 6)), ...]; None when the source has none.
+    # a callable returning [(features (T, 36), labels (T, 6)), ...], given path_shape=True the features
+    # followed by the hand's path and shape (`to_policy_clip`); None when the source has none.
     default_context: Callable[[], list] | None = None
     # Seconds, for a finite stream (the run ends there by default); inf for a live stream (the run
     # goes on until Ctrl-C); None: the run ends when the task is done (scenario.stop_when_done).

@@ -97,7 +97,7 @@ def from_options(options, scenario):
     users = sorted({c.user for c in raw})
     names = {c.name for c in clips}
 
-    def default_context():
+    def default_context(path_shape: bool = False):
         if len(users) != 1:
             raise InputError(f"{path}: the replayed stream has {len(users)} users; "
                              "give their context with --context-file and --context-user")
@@ -107,6 +107,6 @@ def from_options(options, scenario):
             raise InputError(f"{path}: all {len(mine)} labelled clips of user {users[0]!r} are being replayed, "
                              "so none is left as context; replay one clip (--clip USER/CLIP) or give the "
                              "context with --context-file PATH.h5 [--context-user USER]")
-        return context_pieces(path, users[0], rate, exclude=names)[0]
+        return context_pieces(path, users[0], rate, exclude=names, path_shape=path_shape)[0]
 
     return GestureSetup(source, default_context, source.end_time)

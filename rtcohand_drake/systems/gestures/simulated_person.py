@@ -589,8 +589,10 @@ def population_user_ids(config: GeneratorConfig | None = None, n_users: int = DE
 
 
 def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
-                          config: PersonConfig | None = None, population_seed: int = DEFAULT_SEED):
-    """The built-in simulated person and its context: (SimulatedPerson, [(features (T, 36), labels (T, 6)), ...]).
+                          config: PersonConfig | None = None, population_seed: int = DEFAULT_SEED,
+                          path_shape: bool = False):
+    """The built-in simulated person and its context: (SimulatedPerson, [(features (T, 36), labels (T, 6)), ...]);
+    with `path_shape` the features are followed by the hand's path and shape (`to_policy_clip`).
 
     The person is a user of the population `python -m rtcohand_drake.data.generate`
     writes by default (15 users, seed 0): `user` names one by id ("u00" ..
@@ -616,7 +618,7 @@ def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
     rate = scenario.policy.rate_hz
     pieces = []
     for clip in clips:
-        pc = to_policy_clip(clip, rate)
+        pc = to_policy_clip(clip, rate, path_shape)
         pieces.append((pc.features, pc.labels))
     X_WU = scenario.cell.user_frame.to_rigid_transform()
     person = SimulatedPerson(profile, X_WU, eye_position(scenario.cell), config, generator, rate, seed,
@@ -631,4 +633,11 @@ def from_options(options, scenario):
 
     population = DEFAULT_SEED if options.population_seed is None else options.population_seed
     person, pieces = make_builtin_person(scenario, seed=options.seed, user=options.user, population_seed=population)
-    return GestureSetup(person, lambda: pieces)
+
+    def context(path_shape: bool = False):
+        if not path_shape:
+            return pieces
+        # The same person's clips again (deterministic in the population seed), with the wider features.
+        return make_builtin_person(scenario, seed=options.seed, user=options.user, population_seed=population,
+                                   path_shape=True)[1]
+    return GestureSetup(person, context)

@@ -1,0 +1,223 @@
+"""A policy file that adds a kernel read of the hand's path and shape to an exported CCHP policy.
+
+    python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
+        [--blend A] [--bandwidth S] [--lambda L]
+
+The 36 hand-part velocities carry the hand's motion, not the posture it is made
+in nor the path it took: a one-finger gesture and the same gesture of the whole
+hand move alike, and a recorded person's 2-4 examples of each gesture do not
+tell them apart by motion alone (docs/real_people.md). The file this writes
+reads `feature_dim` = 36 + PATH_SHAPE_DIM features: the paper's 36 first, then
+the hand's path and shape (`rtcohand_drake.data.hand_features.PathShapeStream`).
+It keeps the exported CCHP policy whole, as a submodule fed the first 36, and
+adds a Gaussian-kernel ridge read of the rest over the person's context:
+
+    encode_context:  s_i = the context steps' path-and-shape features, standardised by their
+                     own mean and spread; G_ij = exp(-|s_i - s_j|^2 / (2 b^2)), b = `--bandwidth`
+                     x the median distance between context steps; M = (G + lambda I)^-1;
+                     W = M Y (Y the context steps' labels)
+    step:            k_i = exp(-|s(t) - s_i|^2 / (2 b^2)); r_k = k . W = (k M) . values
+                     mean = A r_k + (1 - A) mean_CCHP,  read = A r_k + (1 - A) read_CCHP
+
+with attention = A k M + (1 - A) attention_CCHP over the K context steps (the CCHP's `values`, which
+a CCHP with `label_lead` shifts that many steps on, are returned as they are; the kernel read reads
+the labels unshifted, so `read` is attention . values only up to that shift), and the box's
+`correction_weight` still weighs the CCHP decoder's correction. `std` and the read variance
+are the CCHP's. The CCHP is fed its own mean, carried in the last 6 entries of h (the caller's
+`y_prev`, the blended mean, is not used). No training: the read is fitted by one linear solve,
+from the person's own clips, when the context is encoded.
+
+Keys (K, D): [M (K) | s (PATH_SHAPE_DIM) | W (6) | mean, spread and b of the standardisation, row-major
+over ceil((2 PATH_SHAPE_DIM + 1) / K) columns | the CCHP's keys]. The settings (A, b, lambda) were
+chosen on recorded development people (docs/real_people.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+import warnings
+from typing import Optional, Sequence, Tuple
+
+import torch
+from torch import nn
+
+from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
+from rtcohand_drake.errors import InputError, run_cli
+
+# Chosen on the 10 recorded development people (docs/real_people.md, section 4).
+DEFAULT_BLEND = 0.75
+DEFAULT_BANDWIDTH = 0.5
+DEFAULT_LAMBDA = 0.3
+
+
+class PathShapeKernelPolicy(nn.Module):
+    """The exported CCHP policy (first 36 features) blended with a kernel read of the path and shape."""
+
+    def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float):
+        super().__init__()
+        if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
+            raise InputError("the inner policy must read the 36 hand features and have step_read")
+        if not (0.0 <= blend <= 1.0 and bandwidth > 0 and lam > 0):
+            raise InputError(f"blend must be in [0, 1], bandwidth and lambda positive; got {blend}, {bandwidth}, {lam}")
+        self.inner = inner
+        self.inner_hidden = int(inner.hidden_size)
+        self.inner_query_size = int(inner.query_size)
+        self.shape_dim = PATH_SHAPE_DIM
+        self.motion_feature_dim = FEATURE_DIM
+        self.feature_dim = FEATURE_DIM + PATH_SHAPE_DIM
+        self.hidden_size = self.inner_hidden + 6
+        self.latent_dim = int(inner.latent_dim)
+        self.motion_dim = 6
+        self.attention_heads = 1
+        self.query_size = self.inner_query_size + PATH_SHAPE_DIM
+        self.kernel_blend = float(blend)
+        self.kernel_bandwidth = float(bandwidth)
+        self.kernel_lambda = float(lam)
+
+    def _block(self, k: int) -> int:
+        """Columns of the kernel read's part of the keys, for K context steps."""
+        return k + self.shape_dim + 6 + (2 * self.shape_dim + 1 + k - 1) // k
+
+    @torch.jit.export
+    def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
+                       ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        if x_c.dim() != 3 or x_c.size(2) != self.feature_dim:
+            raise RuntimeError(f"encode_context: x_c must be (B, T, {self.feature_dim}), got {x_c.shape}")
+        m = mask.to(torch.bool)
+        if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
+            raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
+        keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c[:, :, :self.motion_feature_dim].contiguous(), y_c, m)
+        s = torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m].to(torch.float64), 0.0, 0.0, 0.0)
+        k = s.size(0)
+        mean = s.mean(0)
+        spread = s.std(0, unbiased=False) + 1e-6
+        s = (s - mean) / spread
+        d = torch.cdist(s, s)
+        apart = d[d > 0]
+        width = self.kernel_bandwidth * (apart.median() if apart.numel() > 0 else torch.ones((), dtype=torch.float64))
+        gram = torch.exp(-d ** 2 / (2.0 * width ** 2))
+        m_inv = torch.linalg.inv(gram + self.kernel_lambda * torch.eye(k, dtype=torch.float64))
+        # The context's own labels: a CCHP with `label_lead` reads labels that many steps later (its
+        # `values`); the kernel read, chosen on recorded people, reads the labels as they are.
+        w = torch.mm(m_inv, torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0))
+        extra_cols = self._block(k) - (k + self.shape_dim + 6)
+        extras = torch.zeros(k * extra_cols, dtype=torch.float64)
+        extras[:2 * self.shape_dim + 1] = torch.cat([mean, spread, width.view(1)])
+        keys = torch.cat([m_inv, s, w, extras.view(k, extra_cols)], 1).to(torch.float32)
+        return torch.cat([keys, keys_in], 1), values, z_mu, z_sigma
+
+    def _kernel(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """k (1, K) of a standardised query (1, PATH_SHAPE_DIM)."""
+        k = keys.size(0)
+        s = keys[:, k:k + self.shape_dim]
+        width = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim]
+        return torch.exp(-torch.cdist(q, s) ** 2 / (2.0 * width ** 2))
+
+    def _standardise(self, x: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        k = keys.size(0)
+        extras = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)
+        x = torch.nan_to_num(x, 0.0, 0.0, 0.0)
+        return ((x - extras[:self.shape_dim]) / extras[self.shape_dim:2 * self.shape_dim]).view(1, -1)
+
+    @torch.jit.export
+    def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """[K]: A k M + (1 - A) the CCHP's attention (mean over its heads)."""
+        k = keys.size(0)
+        inner = self.inner.attention_of(query[:self.inner_query_size], keys[:, self._block(k):])
+        if inner.dim() == 2:
+            inner = inner.mean(0)
+        kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys), keys[:, :k]).view(-1)
+        return self.kernel_blend * kernel + (1.0 - self.kernel_blend) * inner
+
+    def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
+              values: torch.Tensor, z: torch.Tensor
+              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                         torch.Tensor]:
+        if x_t.numel() != self.feature_dim:
+            raise RuntimeError(f"step: x_t must have {self.feature_dim} features, got {x_t.numel()}")
+        k = keys.size(0)
+        x_t = x_t.view(-1)
+        hi = self.inner_hidden
+        mean_i, std, h2, c2, read_i, v, query_i = self.inner.step_read(
+            x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], keys[:, self._block(k):], values, z)
+        q = self._standardise(x_t[self.motion_feature_dim:], keys)
+        read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6]).view(6)
+        a = self.kernel_blend
+        mean = a * read_k + (1.0 - a) * mean_i
+        read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
+        return (mean, std, torch.cat([h2, mean_i]), torch.cat([c2, torch.zeros(6)]), read, v,
+                torch.cat([query_i, q.view(-1)]))
+
+    @torch.jit.export
+    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                             torch.Tensor, torch.Tensor]:
+        """(mean, std, h, c, read [1, 6], v [1], query [query_size]); `y_prev` is not used (the
+        CCHP's own mean is carried in h)."""
+        return self._step(x_t, h, c, keys, values, z)
+
+    @torch.jit.export
+    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                                      torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys), v
+
+    @torch.jit.export
+    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys)
+
+
+def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
+                            bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA) -> pathlib.Path:
+    """Writes the extended policy file, its model card extended with the read's settings."""
+    from rtcohand_drake.learning.export import policy_and_card
+    from rtcohand_drake.learning.policy_file import load_policy
+
+    inner = load_policy(policy)
+    if int(inner.feature_dim) != FEATURE_DIM:
+        raise InputError(f"{policy}: already reads {int(inner.feature_dim)} features; give a 36-feature CCHP policy")
+    _, card = policy_and_card(policy)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
+        scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam).eval())
+    card = dict(card, path_shape_read={
+        "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
+        "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
+        "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
+    os.replace(tmp, out)
+    return out
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--policy", required=True, help="an exported 36-feature CCHP policy file")
+    p.add_argument("--out", required=True)
+    p.add_argument("--blend", type=float, default=DEFAULT_BLEND, help="A: the kernel read's share of the mean")
+    p.add_argument("--bandwidth", type=float, default=DEFAULT_BANDWIDTH, help="b / the median distance")
+    p.add_argument("--lambda", dest="lam", type=float, default=DEFAULT_LAMBDA)
+    args = p.parse_args(argv)
+    out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam)
+    print(f"wrote {out}")
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.learning.path_shape_policy"))
+
+
+if __name__ == "__main__":
+    entry_point()
