@@ -43,14 +43,15 @@ def load_or_build(path: pathlib.Path):
 def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator):
     piece = 50  # 5 s clips at 10 Hz
     b = int(np.ceil(k / piece))
-    x_c = torch.from_numpy(rng.normal(size=(b, piece, 36)).astype(np.float32) * 0.2)
+    f = int(policy.feature_dim)  # 36, or 351 for a file that reads the hand's path and shape
+    x_c = torch.from_numpy(rng.normal(size=(b, piece, f)).astype(np.float32) * 0.2)
     y_c = torch.from_numpy(rng.normal(size=(b, piece, 6)).astype(np.float32) * 0.1)
     mask = torch.zeros(b, piece, dtype=torch.bool)
     mask.view(-1)[:k] = True
     t0 = time.perf_counter()
     keys, values, z_mu, z_sigma = policy.encode_context(x_c, y_c, mask)
     encode_s = time.perf_counter() - t0
-    xs = torch.from_numpy(rng.normal(size=(steps + warmup, 36)).astype(np.float32) * 0.2)
+    xs = torch.from_numpy(rng.normal(size=(steps + warmup, f)).astype(np.float32) * 0.2)
     result = {"K": k, "encode_context_s": encode_s}
     methods = [("step", policy.step)] + ([("step_read", policy.step_read)] if hasattr(policy, "step_read") else [])
     for name, method in methods:

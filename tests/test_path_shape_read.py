@@ -96,7 +96,7 @@ def _kernel_read(context, query, bandwidth, lam):
 
 def test_policy_file_blends_the_cchp_with_a_kernel_read_of_the_context(tmp_path):
     inner_path = _inner_policy(tmp_path)
-    path = build_path_shape_policy(inner_path, tmp_path / "wide.pt", blend=0.7, bandwidth=0.6, lam=0.4)
+    path = build_path_shape_policy(inner_path, tmp_path / "wide.pt", blend=0.7, bandwidth=0.6, lam=0.4, folds=0)
     module = load_policy(path)  # torch.jit.load alone, with the checks the software makes
     inner = load_policy(inner_path)
     assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
@@ -127,6 +127,53 @@ def test_policy_file_blends_the_cchp_with_a_kernel_read_of_the_context(tmp_path)
             assert np.allclose(kernel_attention.numpy() @ y_all, kernel[t], atol=2e-4)
     with pytest.raises(Exception, match="x_c must be"):  # torch.jit.Error carries the RuntimeError
         module.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
+
+
+def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
+    """With --folds, A is the least-squares blend of the two reads over the person's own clips, each
+    read with the other folds' clips as context: here the kernel read is refitted from scratch."""
+    inner_path = _inner_policy(tmp_path)
+    path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3)
+    module, inner = load_policy(path), load_policy(inner_path)
+    rng = np.random.default_rng(7)
+    context = _pieces(rng, [14, 9, 12, 11, 8])
+    for x, y in context:  # labels the path and shape tell: the kernel read should win some weight
+        y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.02 + y
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, _, _, _ = module.encode_context(x_c, y_c, mask)
+    s_all = np.concatenate([x[:, FEATURE_DIM:] for x, _ in context]).astype(np.float64)
+    y_all = np.concatenate([y for _, y in context]).astype(np.float64)
+    mean, spread = s_all.mean(0), s_all.std(0) + 1e-6
+    standard = (s_all - mean) / spread
+    d = np.sqrt(((standard[:, None] - standard[None]) ** 2).sum(-1))
+    apart = np.sort(d[d > 0])
+    width = 0.6 * apart[(len(apart) - 1) // 2]
+    starts = np.cumsum([0] + [len(x) for x, _ in context])
+    num = den = 0.0
+    for f in range(3):
+        out = [b for b in range(5) if b % 3 == f]
+        rows = [b for b in range(5) if b % 3 != f]
+        fit = np.concatenate([np.arange(starts[b], starts[b + 1]) for b in rows])
+        gram = np.exp(-d[np.ix_(fit, fit)] ** 2 / (2 * width ** 2))
+        weights = np.linalg.solve(gram + 0.01 * np.eye(len(fit)), y_all[fit])
+        kept = [context[b] for b in rows]
+        kx, ky, km = (torch.from_numpy(a) for a in pack_context([(x[:, :FEATURE_DIM], y) for x, y in kept]))
+        ikeys, ivalues, iz, _ = inner.encode_context(kx, ky, km)
+        for b in out:
+            span = np.arange(starts[b], starts[b + 1])
+            kernel = np.exp(-d[np.ix_(span, fit)] ** 2 / (2 * width ** 2)) @ weights
+            H = int(inner.hidden_size)
+            h, c, y_prev = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+            with torch.no_grad():
+                for t, x in enumerate(context[b][0]):
+                    y_prev, _, h, c, _, _, _ = inner.step_read(torch.from_numpy(x[:FEATURE_DIM]), y_prev, h, c, ikeys,
+                                                               ivalues, iz)
+                    cchp = y_prev.numpy().astype(np.float64)
+                    num += (kernel[t] - cchp) @ (y_all[span[t]] - cchp)
+                    den += (kernel[t] - cchp) @ (kernel[t] - cchp)
+    expected = float(np.clip(num / den, 0.0, 1.0))
+    assert 0.05 < expected < 0.999  # a blend, not a bound
+    assert float(module._blend(keys)) == pytest.approx(expected, abs=2e-4)
 
 
 def test_bad_settings_and_wide_inner_files_are_one_line_errors(tmp_path):
@@ -191,3 +238,28 @@ def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_
     ok = (k >= 1) & (k < len(offline))
     assert ok.sum() >= len(offline) - 3 and np.abs(offline).max() > 1e-3
     assert np.max(np.abs(log.data().T[ok] - offline[k[ok]])) < 1e-4
+
+
+def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
+    """models/cchp_path_shape.pt is `path_shape_policy` applied to models/cchp_default.pt with its defaults."""
+    import pathlib
+
+    from rtcohand_drake.learning import path_shape_policy as psp
+    from rtcohand_drake.learning.export import read_model_card
+
+    models = pathlib.Path(__file__).resolve().parents[1] / "models"
+    card = read_model_card(models / "cchp_path_shape.pt")
+    assert card["path_shape_read"] == {
+        "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
+        "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
+        "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
+        "features": card["path_shape_read"]["features"]}
+    wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
+    assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
+        psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
+    rng = np.random.default_rng(5)
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(_pieces(rng, [25, 18])))
+    keys, values, z_mu, z_sigma = wide.encode_context(x_c, y_c, mask)
+    inner_keys, inner_values, inner_mu, inner_sigma = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
+    assert torch.equal(keys[:, -inner_keys.shape[1]:], inner_keys) and torch.equal(values, inner_values)
+    assert torch.equal(z_mu, inner_mu) and torch.equal(z_sigma, inner_sigma)

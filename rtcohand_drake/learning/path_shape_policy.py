@@ -40,7 +40,7 @@ import os
 import pathlib
 import sys
 import warnings
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import torch
 from torch import nn
@@ -52,17 +52,21 @@ from rtcohand_drake.errors import InputError, run_cli
 DEFAULT_BLEND = 0.75
 DEFAULT_BANDWIDTH = 0.5
 DEFAULT_LAMBDA = 0.3
+DEFAULT_CV_FOLDS = 4  # chosen on recorded development people and a development simulated population
+DEFAULT_CV_ROWS = 12
 
 
 class PathShapeKernelPolicy(nn.Module):
     """The exported CCHP policy (first 36 features) blended with a kernel read of the path and shape."""
 
-    def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float):
+    def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
+                 folds: int = 0, rows: int = DEFAULT_CV_ROWS):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
-        if not (0.0 <= blend <= 1.0 and bandwidth > 0 and lam > 0):
-            raise InputError(f"blend must be in [0, 1], bandwidth and lambda positive; got {blend}, {bandwidth}, {lam}")
+        if not (0.0 <= blend <= 1.0 and bandwidth > 0 and lam > 0 and folds >= 0 and rows >= 1):
+            raise InputError(f"blend must be in [0, 1], bandwidth and lambda positive, folds >= 0 and rows >= 1; "
+                             f"got {blend}, {bandwidth}, {lam}, {folds}, {rows}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         self.inner_query_size = int(inner.query_size)
@@ -74,13 +78,15 @@ class PathShapeKernelPolicy(nn.Module):
         self.motion_dim = 6
         self.attention_heads = 1
         self.query_size = self.inner_query_size + PATH_SHAPE_DIM
-        self.kernel_blend = float(blend)
+        self.kernel_blend = float(blend)  # A when not cross-validated, and for a context of one clip
+        self.blend_folds = int(folds)  # 0: A fixed; else A chosen per context by this many folds of clips
+        self.blend_rows = int(rows)  # the clips the cross-validation steps through, at most
         self.kernel_bandwidth = float(bandwidth)
         self.kernel_lambda = float(lam)
 
     def _block(self, k: int) -> int:
         """Columns of the kernel read's part of the keys, for K context steps."""
-        return k + self.shape_dim + 6 + (2 * self.shape_dim + 1 + k - 1) // k
+        return k + self.shape_dim + 6 + (2 * self.shape_dim + 2 + k - 1) // k
 
     @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
@@ -104,11 +110,69 @@ class PathShapeKernelPolicy(nn.Module):
         # The context's own labels: a CCHP with `label_lead` reads labels that many steps later (its
         # `values`); the kernel read, chosen on recorded people, reads the labels as they are.
         w = torch.mm(m_inv, torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0))
+        blend = torch.full((1,), self.kernel_blend, dtype=torch.float64)
+        if self.blend_folds > 0 and x_c.size(0) > 1:
+            blend = self._cross_validated_blend(x_c, y_c, m, m_inv, w).view(1)
         extra_cols = self._block(k) - (k + self.shape_dim + 6)
         extras = torch.zeros(k * extra_cols, dtype=torch.float64)
-        extras[:2 * self.shape_dim + 1] = torch.cat([mean, spread, width.view(1)])
+        extras[:2 * self.shape_dim + 2] = torch.cat([mean, spread, width.view(1), blend])
         keys = torch.cat([m_inv, s, w, extras.view(k, extra_cols)], 1).to(torch.float32)
         return torch.cat([keys, keys_in], 1), values, z_mu, z_sigma
+
+    def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, m_inv: torch.Tensor,
+                               w: torch.Tensor) -> torch.Tensor:
+        """A in [0, 1] that best blends the two reads on the person's own clips, each clip read with
+        the clips of the other folds as context (clip b is in fold b mod F): the CCHP stepped over
+        the clip (its own mean fed back, z the prior mean), the kernel read from the exact
+        leave-fold-out solution of the whole context's solve (Y_S - (M_SS)^-1 (M Y)_S for the fold's
+        steps S). Least squares over every step of `blend_rows` clips spread over the context."""
+        n_rows = x_c.size(0)
+        folds = min(self.blend_folds, n_rows)
+        counts = m.sum(1)
+        starts = torch.cumsum(counts, 0) - counts
+        y = torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0)
+        fitted_residual = torch.mm(m_inv, y)  # (M Y): the full solve's residuals, scaled
+        stride = max(1, n_rows // self.blend_rows)
+        num = torch.zeros((), dtype=torch.float64)
+        den = torch.zeros((), dtype=torch.float64)
+        hi = self.inner_hidden
+        for f in range(folds):
+            out_rows: List[int] = []
+            in_rows: List[int] = []
+            spans: List[torch.Tensor] = []
+            for b in range(n_rows):
+                if b % folds == f:
+                    out_rows.append(b)
+                    spans.append(torch.arange(int(starts[b]), int(starts[b] + counts[b])))
+                else:
+                    in_rows.append(b)
+            steps = torch.cat(spans)
+            loo = y[steps] - torch.linalg.solve(m_inv[steps][:, steps], fitted_residual[steps])
+            keep = torch.tensor(in_rows)
+            keys, values, z, _ = self.inner.encode_context(
+                x_c[keep][:, :, :self.motion_feature_dim].contiguous(), y_c[keep], m[keep])
+            offset = 0
+            for b in out_rows:
+                n = int(counts[b])
+                if b % stride == 0:
+                    h = torch.zeros(hi)
+                    c = torch.zeros(hi)
+                    y_prev = torch.zeros(6)
+                    for t in range(n):
+                        y_prev, _, h, c, _, _, _ = self.inner.step_read(
+                            torch.nan_to_num(x_c[b, t, :self.motion_feature_dim], 0.0, 0.0, 0.0), y_prev, h, c,
+                            keys, values, z)
+                        gap = loo[offset + t] - y_prev.to(torch.float64)
+                        num += (gap * (y[int(starts[b]) + t] - y_prev.to(torch.float64))).sum()
+                        den += (gap * gap).sum()
+                offset += n
+        if den <= 0:
+            return torch.full((), self.kernel_blend, dtype=torch.float64)
+        return torch.clamp(num / den, 0.0, 1.0)
+
+    def _blend(self, keys: torch.Tensor) -> torch.Tensor:
+        k = keys.size(0)
+        return keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim + 1]
 
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
         """k (1, K) of a standardised query (1, PATH_SHAPE_DIM)."""
@@ -131,7 +195,8 @@ class PathShapeKernelPolicy(nn.Module):
         if inner.dim() == 2:
             inner = inner.mean(0)
         kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys), keys[:, :k]).view(-1)
-        return self.kernel_blend * kernel + (1.0 - self.kernel_blend) * inner
+        a = self._blend(keys)
+        return a * kernel + (1.0 - a) * inner
 
     def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
               values: torch.Tensor, z: torch.Tensor
@@ -146,7 +211,7 @@ class PathShapeKernelPolicy(nn.Module):
             x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], keys[:, self._block(k):], values, z)
         q = self._standardise(x_t[self.motion_feature_dim:], keys)
         read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6]).view(6)
-        a = self.kernel_blend
+        a = self._blend(keys)
         mean = a * read_k + (1.0 - a) * mean_i
         read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
         return (mean, std, torch.cat([h2, mean_i]), torch.cat([c2, torch.zeros(6)]), read, v,
@@ -178,7 +243,8 @@ class PathShapeKernelPolicy(nn.Module):
 
 
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
-                            bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA) -> pathlib.Path:
+                            bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
+                            folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings."""
     from rtcohand_drake.learning.export import policy_and_card
     from rtcohand_drake.learning.policy_file import load_policy
@@ -189,9 +255,10 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
     _, card = policy_and_card(policy)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-        scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam).eval())
+        scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
+        "blend_folds": folds, "blend_rows": rows,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
     out = pathlib.Path(out)
@@ -209,8 +276,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--blend", type=float, default=DEFAULT_BLEND, help="A: the kernel read's share of the mean")
     p.add_argument("--bandwidth", type=float, default=DEFAULT_BANDWIDTH, help="b / the median distance")
     p.add_argument("--lambda", dest="lam", type=float, default=DEFAULT_LAMBDA)
+    p.add_argument("--folds", type=int, default=DEFAULT_CV_FOLDS,
+                   help="choose A per context by this many folds of its clips (0: A fixed at --blend)")
+    p.add_argument("--rows", type=int, default=DEFAULT_CV_ROWS, help="clips the choice of A steps through, at most")
     args = p.parse_args(argv)
-    out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam)
+    out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows)
     print(f"wrote {out}")
     return 0
 
