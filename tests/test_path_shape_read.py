@@ -263,3 +263,16 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     inner_keys, inner_values, inner_mu, inner_sigma = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
     assert torch.equal(keys[:, -inner_keys.shape[1]:], inner_keys) and torch.equal(values, inner_values)
     assert torch.equal(z_mu, inner_mu) and torch.equal(z_sigma, inner_sigma)
+
+
+def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):
+    """The reading check gives the wide file the path and shape, and its references the 36 velocities."""
+    from rtcohand_drake.analysis.context_reading import main
+
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt")
+    clips = read_dataset(person_file)
+    small = tmp_path / "eight_clips.h5"
+    write_dataset(small, [c for c in clips if c.user == clips[0].user][:8])
+    assert main(["--context-file", str(small), "--model", str(path), "--folds", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "policy wide.pt" in out and "held-out squared error over the played clips" in out

@@ -163,12 +163,14 @@ def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, wind
     `make()` gives (an unfitted reference with `fit(pieces)` and `predict(features)`)."""
     from rtcohand_drake.learning.ridge_reference import RidgeReference
 
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+
     make = make or (lambda: RidgeReference(window, lam))
     means: list = [None] * len(clips)
-    for targets, context in groups or fold_groups(len(clips), folds):
-        reference = make().fit([(clips[i].features, clips[i].labels) for i in context])
+    for targets, context in groups or fold_groups(len(clips), folds):  # the references read the 36 velocities
+        reference = make().fit([(clips[i].features[:, :FEATURE_DIM], clips[i].labels) for i in context])
         for i in targets:
-            means[i] = reference.predict(clips[i].features)
+            means[i] = reference.predict(clips[i].features[:, :FEATURE_DIM])
     return means
 
 
@@ -221,11 +223,13 @@ def recording_style(path: Path) -> str:
     return protocol.get("style", "hold") if isinstance(protocol, dict) else "hold"
 
 
-def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[LabelledClip], str]:
+def clips_from_file(path: Path, user: str | None, rate_hz: float,
+                    path_shape: bool = False) -> tuple[list[LabelledClip], str]:
+    """A user's labelled clips from a file (`path_shape`: with the hand's path and shape, `to_policy_clip`)."""
     from rtcohand_drake.data.dataset import DatasetError, load_policy_clips
 
     try:
-        clips = [c for c in load_policy_clips(path, rate_hz) if c.labels is not None]
+        clips = [c for c in load_policy_clips(path, rate_hz, path_shape) if c.labels is not None]
     except DatasetError as err:
         raise InputError(str(err)) from None
     users = sorted({c.user for c in clips})
@@ -242,7 +246,8 @@ def clips_from_file(path: Path, user: str | None, rate_hz: float) -> tuple[list[
     return mine, user
 
 
-def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None) -> list[LabelledClip]:
+def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None,
+                  path_shape: bool = False) -> list[LabelledClip]:
     """The labelled clips of a built-in simulated user (as `make_builtin_person` makes them), from the
     default population or the one `data.generate --seed population_seed` writes."""
     from rtcohand_drake.data.dataset import to_policy_clip
@@ -257,7 +262,7 @@ def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None)
     _, raw, _ = simulate_user(GeneratorConfig(), list(ids).index(user), ids[user], seed)
     out = []
     for clip in raw:
-        pc = to_policy_clip(clip, rate_hz)
+        pc = to_policy_clip(clip, rate_hz, path_shape)
         out.append(LabelledClip(pc.name, pc.features, pc.labels, tuple(int(d) for d in clip.active_dims)))
     return out
 
@@ -300,10 +305,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise InputError(f"command line: --correction-weight must be in [0, 1], got {weight}")
     model = args.model or policy_file_path(scenario.policy.model)
     module = load_policy(model)
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+
+    wide = int(module.feature_dim) > FEATURE_DIM  # a file that reads the hand's path and shape
     if args.user is not None:
-        clips, who = builtin_clips(args.user, args.rate_hz, args.population_seed), args.user
+        clips, who = builtin_clips(args.user, args.rate_hz, args.population_seed, wide), args.user
     else:
-        clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz)
+        clips, who = clips_from_file(args.context_file, args.context_user, args.rate_hz, wide)
     from rtcohand_drake.learning.evaluate import KNN_DEFAULT, RIDGE_DEFAULT
     from rtcohand_drake.learning.knn_reference import KnnReference
 
