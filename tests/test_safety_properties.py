@@ -31,7 +31,7 @@ from rtcohand_drake.systems.safety.supervisor import plausible_features
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.analysis.inspection import mold_clearance
 from rtcohand_drake.cell.plant import eye_position
-from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, POSITION_MEASURED, VELOCITY_COMMAND
+from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINTS, POSITION_MEASURED, VELOCITY_COMMAND
 
 EXAMPLES = int(os.environ.get("RTCOHAND_PROPERTY_EXAMPLES", "500"))
 SHARD = int(os.environ.get("RTCOHAND_PROPERTY_SHARD", "0"))
@@ -41,13 +41,19 @@ KINDS = ("gesture", "nan", "inf", "huge", "frozen", "dropped", "jump", "flip", "
 
 
 class StreamGestureSource(LeafSystem):
-    """Plays a pre-generated stream of (features, valid, frame_time) at the policy rate (test harness)."""
+    """Plays a pre-generated stream of (features, valid, frame_time[, keypoints]) at the policy rate (test
+    harness); with `keypoints`, also the skeleton, for a policy file that reads the hand's path and shape."""
 
-    def __init__(self):
+    def __init__(self, keypoints: bool = False):
         super().__init__()
-        self.stream = (np.zeros((1, 36)), np.ones(1), np.zeros(1))
+        self.stream = (np.zeros((1, 36)), np.ones(1), np.zeros(1)) + ((np.zeros((1, 63)),) if keypoints else ())
         self.DeclareVectorOutputPort(GESTURE_FEATURES, 36, self._features)
         self.DeclareVectorOutputPort(GESTURE_STATUS, 2, self._status)
+        if keypoints:
+            self.DeclareVectorOutputPort(KEYPOINTS, 63, self._keypoints)
+
+    def _keypoints(self, context, output: BasicVector):
+        output.SetFromVector(self.stream[3][self._k(context)])
 
     def _k(self, context):
         return min(int(np.floor(context.get_time() * RATE_HZ + 1e-6)), len(self.stream[0]) - 1)
@@ -107,6 +113,38 @@ def make_stream(segments, seed):
     return np.array(feats[:n_total]), np.array(valid[:n_total]), np.array(times[:n_total])
 
 
+REST_HAND = np.random.default_rng(99).normal(0.0, 0.03, (21, 3)) + np.array([0.0, 0.4, 0.2])
+
+
+def make_keypoints(segments, seed):
+    """The skeleton beside `make_stream`'s features (N, 63), with the same kinds of fault: a hand that
+    moves in a gesture, is lost (NaN) or infinite, is put a million metres or a jump away for a frame,
+    is mirrored, or holds still. Its own random stream, so `make_stream`'s is unchanged."""
+    rng = np.random.default_rng([seed, 1])
+    hand, out = REST_HAND.copy(), []
+    for kind, n, scale in segments:
+        direction = rng.normal(size=3)
+        for i in range(n):
+            shown = hand
+            if kind == "gesture":
+                hand = hand + 0.05 * scale * np.sin(np.pi * (i + 1) / (n + 1)) * direction
+                shown = hand
+            elif kind in ("nan", "dropped"):
+                shown = np.full((21, 3), np.nan)
+            elif kind == "inf":
+                shown = np.full((21, 3), np.inf)
+            elif kind == "huge":
+                shown = hand + 1e6 * direction
+            elif kind == "jump":
+                shown = hand + 0.5 * scale * direction
+            elif kind == "flip":
+                shown = 2.0 * hand.mean(axis=0) - hand
+            out.append(shown.reshape(-1))
+    n_total = int(DURATION_S * RATE_HZ) + 1
+    out += [hand.reshape(-1)] * max(0, n_total - len(out))
+    return np.array(out[:n_total])
+
+
 @pytest.fixture(scope="module")
 def harness():
     """{seated: (scenario, run, source, operator)}: the part lifted into free space, or in its mold."""
@@ -139,10 +177,17 @@ def policy_file(scenario):
 
 
 def _harness(scenario, model):
-    source = StreamGestureSource()
+    from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM
+    from rtcohand_drake.learning.policy_file import load_policy
+
+    wide = int(load_policy(model).feature_dim) > 36  # a file that reads the hand's path and shape
+    source = StreamGestureSource(keypoints=wide)
     operator = SettableOperator()
     context_rng = np.random.default_rng(0)
     pieces = [(context_rng.normal(0, 0.2, (40, 36)), context_rng.normal(0, 0.05, (40, 6))) for _ in range(3)]
+    if wide:
+        shape_rng = np.random.default_rng(1)
+        pieces = [(np.hstack([x, shape_rng.normal(0, 0.05, (40, PATH_SHAPE_DIM))]), y) for x, y in pieces]
     policy = CchpPolicy(model, pieces, RATE_HZ, seed=0, correction_weight=scenario.policy.correction_weight)
     run = build_run_diagram(scenario, source=source, policy=policy, operator=operator, gesture_source="stream")
     return scenario, run, source, operator
@@ -170,6 +215,8 @@ SETTINGS.update(dict(derandomize=False, database=None) if SHARD > 0 else dict(de
 def test_no_stream_makes_the_arm_unsafe(harness, segments, pauses, seed, in_mold):
     scenario, run, source, operator = harness[in_mold]
     source.stream = make_stream(segments, seed)
+    if source.HasOutputPort(KEYPOINTS):
+        source.stream += (make_keypoints(segments, seed),)
     pause_windows = [(a, a + d) for a, d in pauses]
     operator.set_pauses(pause_windows)
     context = run.diagram.CreateDefaultContext()

@@ -128,14 +128,6 @@ class CchpPolicy(LeafSystem):
 
         self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
         self._resume = self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
-        self._shape = None
-        if self.feature_dim > FEATURE_DIM:
-            if self.feature_dim != FEATURE_DIM + PATH_SHAPE_DIM:
-                raise InputError(f"{self.model_path}: reads {self.feature_dim} features; this box gives 36 or "
-                                 f"{FEATURE_DIM + PATH_SHAPE_DIM}")
-            self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
-            self._stream = PathShapeStream(rate_hz)
-            self._shape = self.DeclareDiscreteState(self._stream.state)
         self._h = self.DeclareDiscreteState(H)
         self._c = self.DeclareDiscreteState(H)
         self._y = self.DeclareDiscreteState(6)  # the module's own mean, fed back
@@ -145,6 +137,14 @@ class CchpPolicy(LeafSystem):
         self._query = self.DeclareDiscreteState(self._query_size)  # the attention itself for older files
         self._variance = self.DeclareDiscreteState(np.ones(1))
         self._out = self.DeclareDiscreteState(6)  # the twist output (module docstring)
+        self._shape = None  # declared last: the states above keep their indices whatever the file
+        if self.feature_dim > FEATURE_DIM:
+            if self.feature_dim != FEATURE_DIM + PATH_SHAPE_DIM:
+                raise InputError(f"{self.model_path}: reads {self.feature_dim} features; this box gives 36 or "
+                                 f"{FEATURE_DIM + PATH_SHAPE_DIM}")
+            self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
+            self._stream = PathShapeStream(rate_hz)
+            self._shape = self.DeclareDiscreteState(self._stream.state)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(POLICY_MEAN, self._out)
         self.DeclareStateOutputPort(POLICY_STD, self._std)
