@@ -276,3 +276,21 @@ def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_pat
     assert main(["--context-file", str(small), "--model", str(path), "--folds", "3"]) == 0
     out = capsys.readouterr().out
     assert "policy wide.pt" in out and "held-out squared error over the played clips" in out
+
+
+@pytest.mark.parametrize("source", ["replay", "synthetic"])
+def test_the_run_command_gives_the_path_shape_file_its_wider_context(tmp_path, person_file, source):
+    """`run --model` with the file for real hands: the replayed person's other clips, or the built-in
+    person's own clips, become its context with the path and shape; the run ends normally."""
+    import subprocess
+    import sys
+
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt")
+    clip = read_dataset(person_file)[0]
+    args = (["--gesture-source", "replay", "--gesture-file", str(person_file), "--clip", clip.name]
+            if source == "replay" else ["--gesture-source", "synthetic", "--duration", "3"])
+    run = subprocess.run([sys.executable, "-m", "rtcohand_drake.run", "--no-meshcat", "--realtime-rate", "0",
+                          "--model", str(path), "--log", str(tmp_path / "run.h5"), *args],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert (tmp_path / "run.h5").is_file() and "simulated in" in run.stdout
