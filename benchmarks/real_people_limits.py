@@ -223,23 +223,11 @@ def trajectory_kernel_share(path: Path, scale: float = TRAJECTORY_KERNEL[0], lam
 
 def kernel_ridge_fit(x: np.ndarray, y: np.ndarray, scale: float = TRAJECTORY_KERNEL[0],
                      lam: float = TRAJECTORY_KERNEL[1], standardise: bool = True):
-    """`predict(features)` of a Gaussian-kernel ridge fitted to (x, y): features standardised by x (unless
-    told not to), the bandwidth `scale` x the median distance between x's rows, the labels' mean the
-    read with no evidence."""
-    import torch
+    """`predict(features)` of the kernel reference (`learning.kernel_reference`) fitted to (x, y), reading
+    every column of x."""
+    from rtcohand_drake.learning.kernel_reference import KernelReference
 
-    standard = _standardiser(x) if standardise else (lambda a: a)
-    keys = torch.from_numpy(standard(x))
-    distance = torch.cdist(keys, keys)
-    width = scale * float(distance[distance > 0].median())
-    gram = torch.exp(-distance ** 2 / (2 * width ** 2)).numpy()
-    mean = y.mean(0)
-    weights = np.linalg.solve(gram + lam * np.eye(len(gram)), y - mean)
-
-    def predict(a):
-        near = torch.cdist(torch.from_numpy(standard(a)), keys)
-        return mean + torch.exp(-near ** 2 / (2 * width ** 2)).numpy() @ weights
-    return predict
+    return KernelReference(scale, lam, start=0, standardise=standardise).fit([(x, y)]).predict
 
 
 def main(argv=None) -> int:

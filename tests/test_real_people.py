@@ -209,6 +209,32 @@ def test_evaluate_person_setting_share_matches_an_independent_calculation(natura
     assert ref["ridge_mse"]["Person"] == pytest.approx(np.mean(ridge), rel=1e-5)
     assert ref["knn_mse"]["Person"] == pytest.approx(np.mean(knn), rel=1e-5)
     assert ref["knn"] == {"window": 6, "k": 3} and ref["ridge"] == {"window": 4, "lam": 50.0}
+    # The kernel read of the path and shape, written out here: the keypoints at the policy's times, now
+    # and 4, 8, 12, 16 steps before about the centre now, standardised, a Gaussian kernel ridge.
+    kernel = []
+    for e in episodes:
+        def shape(name):
+            clip = raw[name]
+            t = np.arange(clip.num_frames) / clip.fps
+            tq = np.arange(int(np.floor(t[-1] * 10.0 + 1e-6)) + 1) / 10.0
+            kp = np.stack([np.interp(tq, t, clip.keypoints[:, i // 3, i % 3]) for i in range(63)], 1).reshape(-1, 21, 3)
+            n = len(kp)
+            return np.concatenate([(kp[np.maximum(np.arange(n) - lag, 0)] - kp.mean(1, keepdims=True)).reshape(n, -1)
+                                   for lag in (0, 4, 8, 12, 16)], 1)
+        names = [c.name for c in read_dataset(natural) if c.user == e.target.user and c.split == "train"]
+        s = np.concatenate([shape(n) for n in names])
+        y_c = np.concatenate([_labels_at_policy_rate(raw[n]) for n in names])
+        mean, spread = s.mean(0), s.std(0) + 1e-6
+        s = (s - mean) / spread
+        d = np.sqrt(((s[:, None] - s[None]) ** 2).sum(-1))
+        width = 0.5 * np.median(d[d > 0])
+        w = np.linalg.solve(np.exp(-d ** 2 / (2 * width ** 2)) + 0.3 * np.eye(len(s)), y_c - y_c.mean(0))
+        q = (shape(e.target.name) - mean) / spread
+        near = np.sqrt(((q[:, None] - s[None]) ** 2).sum(-1))
+        pred = y_c.mean(0) + np.exp(-near ** 2 / (2 * width ** 2)) @ w
+        kernel.append(np.mean((_labels_at_policy_rate(raw[e.target.name]) - pred) ** 2))
+    assert ref["kernel_mse"]["Person"] == pytest.approx(np.mean(kernel), rel=2e-3)  # its features are float32
+    assert ref["kernel"] == {"bandwidth": 0.5, "lam": 0.3}
     assert "share of commanding zero twist" in (tmp_path / "results.md").read_text()
 
 

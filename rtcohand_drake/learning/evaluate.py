@@ -23,7 +23,9 @@ Three references get a row in every table: always commanding zero twist, a
 ridge regression fitted on exactly each episode's context
 (`rtcohand_drake.learning.ridge_reference`, `--ridge WINDOW LAMBDA`), and a
 nearest-neighbour read of the recent hand motion fitted alike
-(`rtcohand_drake.learning.knn_reference`, `--knn WINDOW K`).
+(`rtcohand_drake.learning.knn_reference`, `--knn WINDOW K`). On recorded
+people (Person) a fourth: a kernel read of the hand's path and shape fitted
+alike (`rtcohand_drake.learning.kernel_reference`).
 
 `--checkpoint` also takes exported policy files (`models/cchp_default.pt`):
 a CCHP policy is rebuilt as the model it was exported from.
@@ -49,7 +51,9 @@ import torch
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.batching import collate
-from rtcohand_drake.data.sampling import ALL_SETTINGS, SETTINGS
+from rtcohand_drake.data.sampling import ALL_SETTINGS, PERSON_SETTING, SETTINGS
+from rtcohand_drake.learning.kernel_reference import BANDWIDTH as KERNEL_BANDWIDTH, LAMBDA as KERNEL_LAMBDA
+from rtcohand_drake.learning.kernel_reference import KernelReference
 from rtcohand_drake.learning.checkpoint import load_model_file, parse_overrides
 
 NOISE_LEVELS = 11  # from (0, 0) to the maxima below, equal increments
@@ -261,6 +265,10 @@ def reference_rows(results: Dict) -> List[Tuple[str, Dict]]:
     if ref.get("knn_mse"):
         k = ref["knn"]
         rows.append((f"nearest-neighbour read of the context (window {k['window']}, k {k['k']})", ref["knn_mse"]))
+    if any(v is not None for v in ref.get("kernel_mse", {}).values()):
+        k = ref["kernel"]
+        rows.append((f"kernel read of the hand's path and shape (bandwidth {k['bandwidth']:g} x the median "
+                     f"distance, lambda {k['lam']:g})", ref["kernel_mse"]))
     return rows
 
 
@@ -432,8 +440,11 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
     clips = load_clips(data, rate)
     episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
-    # The same episodes (same clips in the same order, same draws) on the wider input.
-    wide = {s: evaluation_episodes(load_clips(data, rate, path_shape=True), s, seed) for s in settings} if stepped else {}
+    # The same episodes (same clips in the same order, same draws) on the wider input, for the files
+    # that read it and for the kernel reference on recorded people.
+    wide_settings = list(settings) if stepped else [s for s in settings if s == PERSON_SETTING]
+    wide_clips = load_clips(data, rate, path_shape=True) if wide_settings else []
+    wide = {s: evaluation_episodes(wide_clips, s, seed) for s in wide_settings}
     if max_episodes > 0:
         episodes = {s: e[:max_episodes] for s, e in episodes.items()}
         wide = {s: e[:max_episodes] for s, e in wide.items()}
@@ -459,7 +470,11 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
                                    "ridge": {"window": ridge[0], "lam": ridge[1]},
                                    # A nonlinear read of the recent hand motion, fitted to each context alike.
                                    "knn_mse": {s: knn_reference_mse(episodes[s], *knn) for s in settings},
-                                   "knn": {"window": knn[0], "k": knn[1]}}}
+                                   "knn": {"window": knn[0], "k": knn[1]},
+                                   # The kernel read of the hand's path and shape (recorded people only).
+                                   "kernel_mse": {s: reference_mse(wide[s], KernelReference) if s == PERSON_SETTING
+                                                  else None for s in settings},
+                                   "kernel": {"bandwidth": KERNEL_BANDWIDTH, "lam": KERNEL_LAMBDA}}}
     for name, entry in per_model.items():
         agg = {}
         for s in settings:
