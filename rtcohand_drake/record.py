@@ -348,6 +348,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", default=None, help="record only these motions, e.g. Tx+,Rz- (default: all)")
     p.add_argument("--no-meshcat", action="store_true", help="no cue in Meshcat (headless)")
     p.add_argument("--no-check", action="store_true", help="skip the reading check at the end")
+    p.add_argument("--model", type=Path, default=None,
+                   help="the policy file the reading check reads the clips with (default: the scenario's; "
+                        "models/cchp_path_shape.pt for a real hand)")
     p.add_argument("--seed", type=int, default=0, help="seeds the simulated person's responses")
     p.add_argument("--labels", choices=("cue", "aruco"), default="cue",
                    help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")
@@ -417,7 +420,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rtcohand_drake.analysis import context_reading
 
     print("reading check:", flush=True)
-    context_reading.main(["--context-file", str(args.out), "--context-user", args.user])
+    context_reading.main(["--context-file", str(args.out), "--context-user", args.user, "--scenario", args.scenario]
+                         + (["--model", str(args.model)] if args.model else []))
     missing = [motion_name(m) for m in ONE_MOTIONS if motion_name(m) not in {c.clip_id[3:] for c in clips}]
     if missing and not args.only:
         print("not recorded (no hand seen): " + ", ".join(missing))

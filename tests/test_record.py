@@ -1,5 +1,6 @@
 """The recorder: a simulated person's session is a contract-valid dataset file with every one-motion clip."""
 
+import pathlib
 from dataclasses import replace as dc_replace
 
 import h5py
@@ -46,6 +47,16 @@ def test_reading_check_names_the_motions(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "| Tx+ | 1 |" in text and "| Rz- | 1 |" in text
     assert "read below half their size:" in text and "--only" in text
+
+
+def test_reading_check_uses_the_policy_file_given(tmp_path, capsys):
+    """`--model` reads the new clips with that file: here the file for real hands, on its wider input."""
+    out = tmp_path / "few.h5"
+    model = pathlib.Path(__file__).resolve().parents[1] / "models" / "cchp_path_shape.pt"
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Tx-,Rz+,Rz-", "--model", str(model)]) == 0
+    text = capsys.readouterr().out
+    assert "policy cchp_path_shape.pt" in text and "| Rz- | 1 |" in text
 
 
 def test_cue_and_only():
