@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 
-def kernel_fit(x, y, scale=0.5, lam=0.3):
-    """The benchmark's kernel ridge (`benchmarks/real_people_limits.py`); features wider than the path and
-    shape arrive standardised already, with the velocities weighted."""
+def kernel_fit(x, y, scale=0.5, lam=0.3, standardise=True):
+    """The benchmark's kernel ridge (`benchmarks/real_people_limits.py`); with the velocities weighted in,
+    the features arrive standardised already (`standardise` False)."""
     import importlib.util
     import pathlib
 
@@ -27,7 +27,7 @@ def kernel_fit(x, y, scale=0.5, lam=0.3):
         "real_people_limits", pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "real_people_limits.py")
     limits = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(limits)
-    return limits.kernel_ridge_fit(x, y, scale, lam, standardise=x.shape[1] <= 315)
+    return limits.kernel_ridge_fit(x, y, scale, lam, standardise=standardise)
 
 
 def main(argv=None):
@@ -46,13 +46,15 @@ def main(argv=None):
     p.add_argument("--vel-weights", type=float, nargs="+", default=[0.0],
                    help="weights of the standardised 36 velocities (mean of the last --vel-steps) beside the path and shape")
     p.add_argument("--vel-steps", type=int, default=1)
+    p.add_argument("--lags", type=float, nargs="+", default=None, help="lags (s) of the path and shape")
     p.add_argument("--max-episodes", type=int, default=0)
     p.add_argument("--stride", type=int, default=1, help="every N-th episode")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     raw = [c for c in read_dataset(args.data) if c.object_velocity is not None]
     clips = [to_policy_clip(c) for c in raw]
-    shape = {m: {c.name: path_shape_features(c.keypoints, c.fps, 10.0, c.timestamps, median=m) for c in raw}
+    lags = {} if args.lags is None else {"lags_s": tuple(args.lags)}
+    shape = {m: {c.name: path_shape_features(c.keypoints, c.fps, 10.0, c.timestamps, median=m, **lags) for c in raw}
              for m in args.medians}
     by_id = {id(c.features): c.name for c in clips}
     episodes = evaluation_episodes(clips, args.setting, 0)
@@ -104,7 +106,7 @@ def main(argv=None):
                 xq = np.hstack([(xq - smean) / sstd, vw * (vt - vmean) / vstd])
             for s in args.scales:
                 for lam in args.lams:
-                    rk = kernel_fit(xk, ylab, s, lam)(xq)
+                    rk = kernel_fit(xk, ylab, s, lam, standardise=vw == 0)(xq)
                     tag = f"m{m} v{vw:g} s{s:g} l{lam:g}"
                     add(f"kernel {tag}", rk, y)
                     for w in (0.5, 1.0):

@@ -357,6 +357,7 @@ class PathShapeStream:
         self._lags = np.array([int(round(s * rate_hz)) for s in lags_s])
         self._median = int(median)
         self._kept = int(self._lags.max()) + 1
+        self._dim = NUM_KEYPOINTS * 3 * len(self._lags)
         self.state = np.zeros(2 + 63 * (self._median + self._kept))
 
     def reset(self) -> None:
@@ -375,7 +376,7 @@ class PathShapeStream:
             raw[-1] = sample
             n_raw = min(n_raw + 1, self._median)
         if not n_raw:
-            return np.zeros(PATH_SHAPE_DIM, np.float32), False
+            return np.zeros(self._dim, np.float32), False
         kept[:-1] = kept[1:].copy()
         kept[-1] = np.median(raw[self._median - n_raw:], axis=0)
         n_kept = min(n_kept + 1, self._kept)
@@ -389,7 +390,7 @@ class PathShapeStream:
 
 def path_shape_features(keypoints: np.ndarray, fps: float, rate_hz: float = 10.0,
                         timestamps: np.ndarray | None = None, max_gap_s: float = DEFAULT_MAX_GAP_S,
-                        median: int = PATH_SHAPE_MEDIAN) -> np.ndarray:
+                        median: int = PATH_SHAPE_MEDIAN, lags_s: tuple = PATH_SHAPE_LAGS_S) -> np.ndarray:
     """The hand's path and shape (T, PATH_SHAPE_DIM) float32 at the sample times of :func:`hand_features`.
 
     The keypoints at each policy time are interpolated as there (a lost sample is held), then fed
@@ -400,8 +401,8 @@ def path_shape_features(keypoints: np.ndarray, fps: float, rate_hz: float = 10.0
         raise ValueError(f"keypoints must have shape (N, 21, 3), got {kp.shape}")
     times = frame_times(kp.shape[0], fps, timestamps)
     kq, known = interpolate_keypoints(kp, times, policy_times(times, rate_hz), max(max_gap_s, 1.5 / float(fps)))
-    stream = PathShapeStream(rate_hz, median)
-    out = np.zeros((len(kq), PATH_SHAPE_DIM), np.float32)
+    stream = PathShapeStream(rate_hz, median, lags_s)
+    out = np.zeros((len(kq), NUM_KEYPOINTS * 3 * len(lags_s)), np.float32)
     for i, (k, ok) in enumerate(zip(kq, known)):
         out[i] = stream.update(k if ok else np.full((NUM_KEYPOINTS, 3), np.nan))[0]
     return out
