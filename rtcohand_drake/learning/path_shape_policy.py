@@ -1,7 +1,7 @@
 """A policy file that adds a kernel read of the hand's path and shape to an exported CCHP policy.
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
-        [--blend A] [--bandwidth S] [--lambda L]
+        [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R]
 
 The 36 hand-part velocities carry the hand's motion, not the posture it is made
 in nor the path it took: a one-finger gesture and the same gesture of the whole
@@ -19,7 +19,12 @@ adds a Gaussian-kernel ridge read of the rest over the person's context:
     step:            k_i = exp(-|s(t) - s_i|^2 / (2 b^2)); r_k = k . W = (k M) . values
                      mean = A r_k + (1 - A) mean_CCHP,  read = A r_k + (1 - A) read_CCHP
 
-with attention = A k M + (1 - A) attention_CCHP over the K context steps (the CCHP's `values`, which
+A is `--blend`, or with `--folds F` > 0 (the shipped file: 4) it is chosen for each person when the
+context is encoded: the least-squares blend of the two reads over the person's own clips, each clip
+read with the other folds' clips as context (`_cross_validated_blend`). The kernel read suits
+recorded people, whose few strokes differ in posture and path; the CCHP suits sustained motions.
+
+With attention = A k M + (1 - A) attention_CCHP over the K context steps (the CCHP's `values`, which
 a CCHP with `label_lead` shifts that many steps on, are returned as they are; the kernel read reads
 the labels unshifted, so `read` is attention . values only up to that shift), and the box's
 `correction_weight` still weighs the CCHP decoder's correction. `std` and the read variance
@@ -27,9 +32,10 @@ are the CCHP's. The CCHP is fed its own mean, carried in the last 6 entries of h
 `y_prev`, the blended mean, is not used). No training: the read is fitted by one linear solve,
 from the person's own clips, when the context is encoded.
 
-Keys (K, D): [M (K) | s (PATH_SHAPE_DIM) | W (6) | mean, spread and b of the standardisation, row-major
-over ceil((2 PATH_SHAPE_DIM + 1) / K) columns | the CCHP's keys]. The settings (A, b, lambda) were
-chosen on recorded development people (docs/real_people.md).
+Keys (K, D): [M (K) | s (PATH_SHAPE_DIM) | W (6) | mean, spread and b of the standardisation and A,
+row-major over ceil((2 PATH_SHAPE_DIM + 2) / K) columns | the CCHP's keys]. The settings were chosen
+on recorded development people, the folds also on a development simulated population
+(docs/real_people.md, section 3).
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ from torch import nn
 from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
 from rtcohand_drake.errors import InputError, run_cli
 
-# Chosen on the 10 recorded development people (docs/real_people.md, section 4).
+# Chosen on the 10 recorded development people (docs/real_people.md, section 3).
 DEFAULT_BLEND = 0.75
 DEFAULT_BANDWIDTH = 0.5
 DEFAULT_LAMBDA = 0.3
