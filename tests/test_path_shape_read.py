@@ -266,7 +266,8 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
 
 
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):
-    """The reading check gives the wide file the path and shape, and its references the 36 velocities."""
+    """The reading check gives the wide file the path and shape, the ridge and nearest neighbours the 36
+    velocities, and adds the kernel read of the path and shape as a third reference."""
     from rtcohand_drake.analysis.context_reading import main
 
     path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt")
@@ -276,6 +277,7 @@ def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_pat
     assert main(["--context-file", str(small), "--model", str(path), "--folds", "3"]) == 0
     out = capsys.readouterr().out
     assert "policy wide.pt" in out and "held-out squared error over the played clips" in out
+    assert "kernel read of the path and shape (bandwidth 0.5, lambda 0.3)" in out  # the third reference
 
 
 @pytest.mark.parametrize("source", ["replay", "synthetic"])

@@ -157,20 +157,22 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
 
 
 def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, window: int = 10,
-                             lam: float = 100.0, groups: Groups | None = None, make=None) -> list:
+                             lam: float = 100.0, groups: Groups | None = None, make=None,
+                             all_features: bool = False) -> list:
     """A fitted-to-the-person reference over every clip, solved on the other folds (or as `groups`
     say): by default the ridge regression (`rtcohand_drake.learning.ridge_reference`), or what
-    `make()` gives (an unfitted reference with `fit(pieces)` and `predict(features)`)."""
+    `make()` gives (an unfitted reference with `fit(pieces)` and `predict(features)`). It reads the
+    36 velocities, or with `all_features` every column the clips carry (the kernel reference)."""
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.ridge_reference import RidgeReference
 
-    from rtcohand_drake.data.hand_features import FEATURE_DIM
-
     make = make or (lambda: RidgeReference(window, lam))
+    cut = None if all_features else FEATURE_DIM
     means: list = [None] * len(clips)
-    for targets, context in groups or fold_groups(len(clips), folds):  # the references read the 36 velocities
-        reference = make().fit([(clips[i].features[:, :FEATURE_DIM], clips[i].labels) for i in context])
+    for targets, context in groups or fold_groups(len(clips), folds):
+        reference = make().fit([(clips[i].features[:, :cut], clips[i].labels) for i in context])
         for i in targets:
-            means[i] = reference.predict(clips[i].features[:, :FEATURE_DIM])
+            means[i] = reference.predict(clips[i].features[:, :cut])
     return means
 
 
@@ -336,6 +338,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"nearest neighbours (window {knn[0]}, k {knn[1]})": held_out_reference_means(
             clips, groups=groups, make=lambda: KnnReference(int(knn[0]), int(knn[1]))),
     }
+    if wide:  # the clips carry the hand's path and shape: the kernel read of it, fitted alike
+        from rtcohand_drake.learning.kernel_reference import BANDWIDTH, LAMBDA, KernelReference
+
+        references[f"kernel read of the path and shape (bandwidth {BANDWIDTH:g}, lambda {LAMBDA:g})"] = \
+            held_out_reference_means(clips, groups=groups, make=KernelReference, all_features=True)
     reference_gains = {label: {name: gain for name, _, gain, _ in
                                motion_table(held_out_readings(None, clips, means=m))}
                        for label, m in references.items()}
