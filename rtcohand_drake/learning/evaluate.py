@@ -39,6 +39,7 @@ noise_sweep.png, spectrum.png, attention.png.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
@@ -51,6 +52,7 @@ import torch
 
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.batching import collate
+from rtcohand_drake.data.hand_features import FEATURE_DIM
 from rtcohand_drake.data.sampling import ALL_SETTINGS, PERSON_SETTING, SETTINGS
 from rtcohand_drake.learning.kernel_reference import BANDWIDTH as KERNEL_BANDWIDTH, LAMBDA as KERNEL_LAMBDA
 from rtcohand_drake.learning.kernel_reference import KernelReference
@@ -162,7 +164,6 @@ def stepped_policy_mse(module, episodes: Sequence) -> Dict:
 
 def _path_shape_policy(path: str):
     """The loaded policy file when it reads the hand's path and shape (feature_dim > 36), else None."""
-    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.policy_file import load_policy, torch_archive_kind
 
     if pathlib.Path(path).is_file() and zipfile.is_zipfile(path) and torch_archive_kind(path, "policy") == "torchscript":
@@ -438,12 +439,14 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         name = names[i] if names else model_name(payload)
         loaded.append((name, ck, model, payload))
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
-    clips = load_clips(data, rate)
-    episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
-    # The same episodes (same clips in the same order, same draws) on the wider input, for the files
-    # that read it and for the kernel reference on recorded people.
+    # The wider input (the hand's path and shape) for the files that read it and for the kernel
+    # reference on recorded people; the other models and references read its first 36 columns.
     wide_settings = list(settings) if stepped else [s for s in settings if s == PERSON_SETTING]
-    wide_clips = load_clips(data, rate, path_shape=True) if wide_settings else []
+    wide_clips = load_clips(data, rate, path_shape=bool(wide_settings))
+    clips = ([dataclasses.replace(c, features=c.features[:, :FEATURE_DIM]) for c in wide_clips] if wide_settings
+             else wide_clips)
+    episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
+    # The same episodes (same clips in the same order, same draws) on the wider input.
     wide = {s: evaluation_episodes(wide_clips, s, seed) for s in wide_settings}
     if max_episodes > 0:
         episodes = {s: e[:max_episodes] for s, e in episodes.items()}

@@ -253,12 +253,10 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings."""
     from rtcohand_drake.learning.export import policy_and_card
-    from rtcohand_drake.learning.policy_file import load_policy
 
-    inner = load_policy(policy)
+    inner, card = policy_and_card(policy)  # checked as load_policy checks a policy file
     if int(inner.feature_dim) != FEATURE_DIM:
         raise InputError(f"{policy}: already reads {int(inner.feature_dim)} features; give a 36-feature CCHP policy")
-    _, card = policy_and_card(policy)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows).eval())
