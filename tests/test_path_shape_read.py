@@ -79,9 +79,9 @@ def _pieces(rng, lengths):
              .astype(np.float32), rng.normal(scale=0.1, size=(n, 6)).astype(np.float32)) for n in lengths]
 
 
-def _kernel_read(context, query, bandwidth, lam):
-    """Gaussian-kernel ridge over the standardised path-and-shape columns, written out in numpy."""
-    s = np.concatenate([x[:, FEATURE_DIM:] for x, _ in context]).astype(np.float64)
+def _kernel_read(context, query, bandwidth, lam, embed=lambda s: s):
+    """Gaussian-kernel ridge over the standardised path-and-shape columns (or their `embed`), written out in numpy."""
+    s = embed(np.concatenate([x[:, FEATURE_DIM:] for x, _ in context])).astype(np.float64)
     y = np.concatenate([l for _, l in context]).astype(np.float64)
     mean, spread = s.mean(0), s.std(0) + 1e-6
     s = (s - mean) / spread
@@ -89,7 +89,7 @@ def _kernel_read(context, query, bandwidth, lam):
     apart = np.sort(d[d > 0])
     width = bandwidth * apart[(len(apart) - 1) // 2]  # the lower median, as torch.median
     weights = np.linalg.solve(np.exp(-d ** 2 / (2 * width ** 2)) + lam * np.eye(len(s)), y)
-    q = (query[:, FEATURE_DIM:].astype(np.float64) - mean) / spread
+    q = (embed(query[:, FEATURE_DIM:]).astype(np.float64) - mean) / spread
     near = np.sqrt(((q[:, None] - s[None]) ** 2).sum(-1))
     return np.exp(-near ** 2 / (2 * width ** 2)) @ weights
 
@@ -265,6 +265,32 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert torch.equal(z_mu, inner_mu) and torch.equal(z_sigma, inner_sigma)
 
 
+def test_the_shipped_path_shape_file_is_what_the_builder_writes_today(tmp_path):
+    """Rebuilt from models/cchp_default.pt by today's code, the file encodes and steps as the shipped one."""
+    import pathlib
+
+    models = pathlib.Path(__file__).resolve().parents[1] / "models"
+    shipped = load_policy(models / "cchp_path_shape.pt")
+    rebuilt = load_policy(build_path_shape_policy(models / "cchp_default.pt", tmp_path / "rebuilt.pt"))
+    rng = np.random.default_rng(6)
+    context, (target, _) = _pieces(rng, [25, 18, 20, 16, 22]), _pieces(rng, [6])[0]
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    with torch.no_grad():
+        encoded = [m.encode_context(x_c, y_c, mask) for m in (shipped, rebuilt)]
+        for a, b in zip(*encoded):
+            assert torch.equal(a, b)
+        H = int(shipped.hidden_size)
+        states = [(torch.zeros(H), torch.zeros(H), torch.zeros(6)) for _ in range(2)]
+        for x in target:
+            out = []
+            for i, (m, enc) in enumerate(zip((shipped, rebuilt), encoded)):
+                h, c, y = states[i]
+                y, _, h, c, _ = m.step(torch.from_numpy(x), y, h, c, enc[0], enc[1], enc[2])
+                states[i] = (h, c, y)
+                out.append(y)
+            assert torch.equal(out[0], out[1])
+
+
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):
     """The reading check gives the wide file the path and shape, the ridge and nearest neighbours the 36
     velocities, and adds the kernel read of the path and shape as a third reference."""
@@ -296,3 +322,131 @@ def test_the_run_command_gives_the_path_shape_file_its_wider_context(tmp_path, p
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     assert (tmp_path / "run.h5").is_file() and "simulated in" in run.stdout
+
+
+def test_an_encoder_learned_across_people_is_what_the_kernel_reads(tmp_path, person_file):
+    """`hand_encoder` learns from a file's people; the policy file built with it reads the kernel over
+    the encoder's embedding, exactly as the same read written out in numpy over that embedding."""
+    from rtcohand_drake.learning import hand_encoder
+
+    people = hand_encoder.people_of([person_file])
+    assert len(people) == 2 and people[0][0][0].shape[1] == PATH_SHAPE_DIM
+    encoder, summary = hand_encoder.train_encoder(people, iterations=3, seed=0, max_clips=6, progress=False)
+    assert summary["iterations"] == 3 and np.isfinite(summary["final_loss"])
+    enc_path = hand_encoder.save_encoder(encoder, tmp_path / "encoder.pt", {"trained_on": [person_file.name]})
+    scripted, card = hand_encoder.load_encoder(enc_path)
+    assert card["kind"] == "hand_encoder" and card["embed_dim"] == hand_encoder.EMBED_DIM
+
+    def embed(s):
+        with torch.no_grad():
+            return scripted(torch.from_numpy(np.asarray(s, np.float32))).numpy()
+
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", blend=1.0, bandwidth=0.6, lam=0.4,
+                                   folds=0, encoder=enc_path)
+    module = load_policy(path)
+    assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
+    rng = np.random.default_rng(2)
+    context, (target, _) = _pieces(rng, [20, 15]), _pieces(rng, [8])[0]
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+    expected, raw = _kernel_read(context, target, 0.6, 0.4, embed), _kernel_read(context, target, 0.6, 0.4)
+    assert np.abs(expected - raw).max() > 1e-3  # the embedding changes the read
+    H = int(module.hidden_size)
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    with torch.no_grad():
+        for t, x in enumerate(target):
+            y, _, h, c, _ = module.step(torch.from_numpy(x), y, h, c, keys, values, z_mu)
+            # 1 %: torch.cdist's rounding leaves a few of the diagonal's zero distances at 1e-7, which the
+            # module's median distance counts; it moves the width by a few parts in a thousand here.
+            assert np.allclose(y.numpy(), expected[t], rtol=1e-2, atol=2e-4), (t, y.numpy(), expected[t])
+    from rtcohand_drake.learning.export import read_model_card
+
+    assert read_model_card(path)["path_shape_read"]["encoder"]["trained_on"] == [person_file.name]
+
+
+def test_the_encoder_learns_a_read_that_tells_motions_apart():
+    """People whose six motions differ only in where the hand goes, each clip made by a hand of its own
+    shape: the raw features' distance is mostly the shape. Training lowers the kernel read's error on
+    held-out clips of the people it learned from."""
+    from rtcohand_drake.data.hand_features import PATH_SHAPE_LAGS_S
+    from rtcohand_drake.learning import hand_encoder
+
+    rng = np.random.default_rng(0)
+
+    def clip(d, sign):  # the path and shape (as PathShapeStream gives it) of a hand that starts to slide at step 4
+        shape = rng.normal(scale=0.04, size=(21, 3))
+        x = np.zeros((12, PATH_SHAPE_DIM), np.float32)
+        for t in range(12):
+            for i, lag in enumerate(PATH_SHAPE_LAGS_S):
+                moved = 0.15 * sign * min(lag, max(0.0, (t - 4) / 10.0))  # how far it went in the last `lag` s
+                x[t, 63 * i:63 * (i + 1)] = (shape - moved * np.eye(3)[d]).ravel()
+        y = np.zeros((12, 6))
+        y[5:, d] = 0.12 * sign
+        return x + rng.normal(scale=0.002, size=x.shape).astype(np.float32), y
+
+    people = [[clip(d, sign) for _ in range(3) for d in range(3) for sign in (1, -1)] for _ in range(3)]
+
+    def held_out_error(encoder):
+        errors = []
+        for person in people:
+            ctx, tgt = person[:12], person[12:]
+            with torch.no_grad():
+                zc = encoder(torch.from_numpy(np.concatenate([x for x, _ in ctx]))).double()
+                zt = encoder(torch.from_numpy(np.concatenate([x for x, _ in tgt]))).double()
+                pred = hand_encoder.kernel_read(zc, torch.from_numpy(np.concatenate([y for _, y in ctx])), zt, 0.5, 0.3)
+            y = np.concatenate([y for _, y in tgt])
+            errors.append(np.mean((pred.numpy() - y) ** 2) / np.mean(y ** 2))
+        return float(np.mean(errors))
+
+    untrained, _ = hand_encoder.train_encoder(people, iterations=1, seed=0, lr=0.0, progress=False)
+    before = held_out_error(untrained)
+    trained, summary = hand_encoder.train_encoder(people, iterations=150, seed=0, progress=False)
+    assert summary["iterations"] == 150
+    after = held_out_error(trained)
+    assert after < 0.3 * before, (after, before)  # measured: 0.05 against 0.73
+
+
+def test_bad_encoder_files_and_data_are_one_line_errors(tmp_path, person_file):
+    from rtcohand_drake.learning import hand_encoder
+
+    inner = _inner_policy(tmp_path)
+    with pytest.raises(InputError, match="no such encoder file"):
+        build_path_shape_policy(inner, tmp_path / "wide.pt", encoder=tmp_path / "missing.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="not an encoder file"):
+        hand_encoder.load_encoder(tmp_path / "junk.pt")
+    with pytest.raises(InputError, match="no encoder card"):
+        hand_encoder.load_encoder(inner)  # a policy file is not an encoder
+    with pytest.raises(InputError, match="iterations >= 1"):
+        hand_encoder.train_encoder([], iterations=5)
+    unlabelled = tmp_path / "unlabelled.h5"
+    import dataclasses
+
+    write_dataset(unlabelled, [dataclasses.replace(c, object_velocity=None) for c in read_dataset(person_file)[:3]])
+    with pytest.raises(InputError, match="no labelled clips"):
+        hand_encoder.people_of([unlabelled])
+
+
+def test_the_encoder_commands_build_a_policy_file_and_reject_a_bad_file_in_one_line(tmp_path, person_file):
+    import subprocess
+    import sys
+
+    def run(module, *args):
+        return subprocess.run([sys.executable, "-m", module, *map(str, args)], capture_output=True, text=True,
+                              timeout=300)
+
+    encoder = tmp_path / "encoder.pt"
+    proc = run("rtcohand_drake.learning.hand_encoder", "--data", person_file, "--out", encoder, "--iterations", 2)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "learning from 2 people of 1 file(s)" in proc.stdout and encoder.is_file()
+    wide = tmp_path / "wide.pt"
+    proc = run("rtcohand_drake.learning.path_shape_policy", "--policy", _inner_policy(tmp_path), "--out", wide,
+               "--encoder", encoder)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert int(load_policy(wide).shape_dim) == 64
+    broken = tmp_path / "broken.h5"
+    broken.write_bytes(person_file.read_bytes()[:5000])
+    proc = run("rtcohand_drake.learning.hand_encoder", "--data", broken, "--out", tmp_path / "no.pt")
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and str(broken) in lines[0], proc.stderr[-2000:]
+    assert not (tmp_path / "no.pt").exists()

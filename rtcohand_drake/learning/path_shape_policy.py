@@ -1,7 +1,7 @@
 """A policy file that adds a kernel read of the hand's path and shape to an exported CCHP policy.
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
-        [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R]
+        [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--encoder ENCODER.pt]
 
 The 36 hand-part velocities carry the hand's motion, not the posture it is made
 in nor the path it took: a one-finger gesture and the same gesture of the whole
@@ -32,8 +32,11 @@ are the CCHP's. The CCHP is fed its own mean, carried in the last 6 entries of h
 `y_prev`, the blended mean, is not used). No training: the read is fitted by one linear solve,
 from the person's own clips, when the context is encoded.
 
-Keys (K, D): [M (K) | s (PATH_SHAPE_DIM) | W (6) | mean, spread and b of the standardisation and A,
-row-major over ceil((2 PATH_SHAPE_DIM + 2) / K) columns | the CCHP's keys]. The settings were chosen
+With `--encoder` (a `learning.hand_encoder` file, learned across people), s_i and s(t) are the
+encoder's embedding of the path and shape instead of the features themselves; the rest is unchanged.
+
+Keys (K, D): [M (K) | s (PATH_SHAPE_DIM, or the embedding's width) | W (6) | mean, spread and b of the standardisation and A,
+row-major over ceil((2 width of s + 2) / K) columns | the CCHP's keys]. The settings were chosen
 on recorded development people, the folds also on a development simulated population
 (docs/real_people.md, section 3).
 """
@@ -66,7 +69,7 @@ class PathShapeKernelPolicy(nn.Module):
     """The exported CCHP policy (first 36 features) blended with a kernel read of the path and shape."""
 
     def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
-                 folds: int = 0, rows: int = DEFAULT_CV_ROWS):
+                 folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -76,14 +79,17 @@ class PathShapeKernelPolicy(nn.Module):
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         self.inner_query_size = int(inner.query_size)
-        self.shape_dim = PATH_SHAPE_DIM
+        # The kernel reads the path and shape as they are, or their embedding by a learned encoder
+        # (learning.hand_encoder); shape_dim is the width of what it reads.
+        self.encoder = nn.Identity() if encoder is None else encoder
+        self.shape_dim = PATH_SHAPE_DIM if encoder is None else int(encoder.embed_dim)
         self.motion_feature_dim = FEATURE_DIM
         self.feature_dim = FEATURE_DIM + PATH_SHAPE_DIM
         self.hidden_size = self.inner_hidden + 6
         self.latent_dim = int(inner.latent_dim)
         self.motion_dim = 6
         self.attention_heads = 1
-        self.query_size = self.inner_query_size + PATH_SHAPE_DIM
+        self.query_size = self.inner_query_size + self.shape_dim
         self.kernel_blend = float(blend)  # A when not cross-validated, and for a context of one clip
         self.blend_folds = int(folds)  # 0: A fixed; else A chosen per context by this many folds of clips
         self.blend_rows = int(rows)  # the clips the cross-validation steps through, at most
@@ -103,7 +109,7 @@ class PathShapeKernelPolicy(nn.Module):
         if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
             raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
         keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c[:, :, :self.motion_feature_dim].contiguous(), y_c, m)
-        s = torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m].to(torch.float64), 0.0, 0.0, 0.0)
+        s = self.encoder(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0)).to(torch.float64)
         k = s.size(0)
         mean = s.mean(0)
         spread = s.std(0, unbiased=False) + 1e-6
@@ -181,7 +187,7 @@ class PathShapeKernelPolicy(nn.Module):
         return keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim + 1]
 
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        """k (1, K) of a standardised query (1, PATH_SHAPE_DIM)."""
+        """k (1, K) of a standardised query (1, shape_dim)."""
         k = keys.size(0)
         s = keys[:, k:k + self.shape_dim]
         width = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim]
@@ -190,7 +196,7 @@ class PathShapeKernelPolicy(nn.Module):
     def _standardise(self, x: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
         k = keys.size(0)
         extras = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)
-        x = torch.nan_to_num(x, 0.0, 0.0, 0.0)
+        x = self.encoder(torch.nan_to_num(x, 0.0, 0.0, 0.0).view(1, -1))
         return ((x - extras[:self.shape_dim]) / extras[self.shape_dim:2 * self.shape_dim]).view(1, -1)
 
     @torch.jit.export
@@ -250,21 +256,28 @@ class PathShapeKernelPolicy(nn.Module):
 
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
-                            folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS) -> pathlib.Path:
-    """Writes the extended policy file, its model card extended with the read's settings."""
+                            folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
+                            encoder: Optional[os.PathLike] = None) -> pathlib.Path:
+    """Writes the extended policy file, its model card extended with the read's settings (and, with
+    `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card
+    from rtcohand_drake.learning.hand_encoder import load_encoder
 
     inner, card = policy_and_card(policy)  # checked as load_policy checks a policy file
     if int(inner.feature_dim) != FEATURE_DIM:
         raise InputError(f"{policy}: already reads {int(inner.feature_dim)} features; give a 36-feature CCHP policy")
+    encoder_module, encoder_card = load_encoder(encoder) if encoder is not None else (None, None)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-        scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows).eval())
+        scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
+                                                          encoder_module).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
+    if encoder_card is not None:
+        card["path_shape_read"]["encoder"] = dict(encoder_card, file=pathlib.Path(encoder).name)
     out = pathlib.Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
@@ -283,8 +296,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--folds", type=int, default=DEFAULT_CV_FOLDS,
                    help="choose A per context by this many folds of its clips (0: A fixed at --blend)")
     p.add_argument("--rows", type=int, default=DEFAULT_CV_ROWS, help="clips the choice of A steps through, at most")
+    p.add_argument("--encoder", default=None,
+                   help="a learning.hand_encoder file: the kernel reads the path and shape through it")
     args = p.parse_args(argv)
-    out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows)
+    out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
+                                  args.encoder)
     print(f"wrote {out}")
     return 0
 
