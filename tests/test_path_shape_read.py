@@ -450,3 +450,43 @@ def test_the_encoder_commands_build_a_policy_file_and_reject_a_bad_file_in_one_l
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and str(broken) in lines[0], proc.stderr[-2000:]
     assert not (tmp_path / "no.pt").exists()
+
+
+def test_a_committed_read_is_the_kernel_reads_dominant_command_at_its_size(tmp_path):
+    """With --commit SHARE LOW HIGH, SHARE of the kernel read is replaced by its dominant command (the axis
+    largest as a share of the context's largest label on it), at full size from HIGH of that size, none
+    below LOW: checked against the same written out in numpy, step by step."""
+    share, low, high = 0.5, 0.2, 0.6
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", blend=1.0, bandwidth=0.6, lam=0.4,
+                                   folds=0, commit=(share, low, high))
+    module = load_policy(path)
+    rng = np.random.default_rng(3)
+    context, (target, _) = _pieces(rng, [30, 22, 17]), _pieces(rng, [12])[0]
+    for i, (_, y) in enumerate(context):  # labels of a command's size on some axes, none on the last
+        y[:] = 0.0
+        y[5:, i % 3] = (0.12, -0.12, 0.3)[i]
+        y[2:4, 3] = 0.6
+    sizes = np.array([0.12, 0.12, 0.3, 0.6, 0.0, 0.0])
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+    kernel = _kernel_read(context, target, 0.6, 0.4)
+    H = int(module.hidden_size)
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    committed_steps = 0
+    with torch.no_grad():
+        for t, x in enumerate(target):
+            y, _, h, c, _ = module.step(torch.from_numpy(x), y, h, c, keys, values, z_mu)
+            r = kernel[t]
+            s = np.divide(r, sizes, out=np.zeros(6), where=sizes > 0)
+            axis = int(np.argmax(np.abs(s)))
+            sure = np.clip((abs(s[axis]) - low) / (high - low), 0.0, 1.0)
+            command = np.zeros(6)
+            command[axis] = sure * np.sign(s[axis]) * sizes[axis]
+            committed_steps += sure > 0
+            assert np.allclose(y.numpy(), share * command + (1 - share) * r, rtol=1e-2, atol=2e-4), (t, y, r)
+    assert committed_steps >= 3  # the check saw the commitment act
+    from rtcohand_drake.learning.export import read_model_card
+
+    assert read_model_card(path)["path_shape_read"]["commit"] == [share, low, high]
+    with pytest.raises(InputError, match="commit needs"):
+        build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", commit=(0.5, 0.6, 0.2))

@@ -63,19 +63,26 @@ DEFAULT_BANDWIDTH = 0.5
 DEFAULT_LAMBDA = 0.3
 DEFAULT_CV_FOLDS = 4  # chosen on recorded development people and a development simulated population
 DEFAULT_CV_ROWS = 12
+# Chosen on the 6 recorded development training people, checked on the 4 validation ones
+# (docs/real_people.md, section 6): half the read committed, full from 0.6 of a command, none below 0.2.
+COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH = 0.5, 0.2, 0.6
+DEFAULT_COMMIT_SHARE = 0.0  # the shipped file's
 
 
 class PathShapeKernelPolicy(nn.Module):
     """The exported CCHP policy (first 36 features) blended with a kernel read of the path and shape."""
 
     def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
-                 folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None):
+                 folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None,
+                 commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH)):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
         if not (0.0 <= blend <= 1.0 and bandwidth > 0 and lam > 0 and folds >= 0 and rows >= 1):
             raise InputError(f"blend must be in [0, 1], bandwidth and lambda positive, folds >= 0 and rows >= 1; "
                              f"got {blend}, {bandwidth}, {lam}, {folds}, {rows}")
+        if not (0.0 <= commit[0] <= 1.0 and 0.0 <= commit[1] < commit[2]):
+            raise InputError(f"commit needs a share in [0, 1] and 0 <= low < high; got {tuple(commit)}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         self.inner_query_size = int(inner.query_size)
@@ -95,10 +102,16 @@ class PathShapeKernelPolicy(nn.Module):
         self.blend_rows = int(rows)  # the clips the cross-validation steps through, at most
         self.kernel_bandwidth = float(bandwidth)
         self.kernel_lambda = float(lam)
+        # The read committed to one command: commit_share of it is the kernel read's dominant command at
+        # full size once the read reaches commit_high of that size (none below commit_low); 0: off.
+        self.commit_share = float(commit[0])
+        self.commit_low = float(commit[1])
+        self.commit_high = float(commit[2])
+        self.extra_size = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
 
     def _block(self, k: int) -> int:
         """Columns of the kernel read's part of the keys, for K context steps."""
-        return k + self.shape_dim + 6 + (2 * self.shape_dim + 2 + k - 1) // k
+        return k + self.shape_dim + 6 + (self.extra_size + k - 1) // k
 
     @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
@@ -121,18 +134,38 @@ class PathShapeKernelPolicy(nn.Module):
         m_inv = torch.linalg.inv(gram + self.kernel_lambda * torch.eye(k, dtype=torch.float64))
         # The context's own labels: a CCHP with `label_lead` reads labels that many steps later (its
         # `values`); the kernel read, chosen on recorded people, reads the labels as they are.
-        w = torch.mm(m_inv, torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0))
+        y_all = torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0)
+        w = torch.mm(m_inv, y_all)
+        # Each axis's command size: the largest label on it in the context (0: never commanded).
+        sizes = y_all.abs().max(0)[0]
         blend = torch.full((1,), self.kernel_blend, dtype=torch.float64)
         if self.blend_folds > 0 and x_c.size(0) > 1:
-            blend = self._cross_validated_blend(x_c, y_c, m, m_inv, w).view(1)
+            blend = self._cross_validated_blend(x_c, y_c, m, m_inv, w, sizes).view(1)
         extra_cols = self._block(k) - (k + self.shape_dim + 6)
         extras = torch.zeros(k * extra_cols, dtype=torch.float64)
-        extras[:2 * self.shape_dim + 2] = torch.cat([mean, spread, width.view(1), blend])
+        parts = [mean, spread, width.view(1), blend]
+        if self.commit_share > 0:
+            parts.append(sizes)
+        extras[:self.extra_size] = torch.cat(parts)
         keys = torch.cat([m_inv, s, w, extras.view(k, extra_cols)], 1).to(torch.float32)
         return torch.cat([keys, keys_in], 1), values, z_mu, z_sigma
 
+    def _committed(self, r: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
+        """Rows of kernel reads (N, 6), each (1 - share) as it is + share x its dominant command (the axis
+        largest as a share of its size in the context), at full size from commit_high of it, scaled
+        down linearly to none at commit_low."""
+        if self.commit_share <= 0:
+            return r
+        known = sizes > 0
+        s = torch.where(known, r / torch.where(known, sizes, torch.ones_like(sizes)), torch.zeros_like(r))
+        axis = s.abs().argmax(1, keepdim=True)
+        size = s.gather(1, axis)
+        sure = torch.clamp((size.abs() - self.commit_low) / (self.commit_high - self.commit_low), 0.0, 1.0)
+        command = torch.zeros_like(r).scatter(1, axis, sure * torch.sign(size) * sizes[axis.view(-1)].view(-1, 1))
+        return self.commit_share * command + (1.0 - self.commit_share) * r
+
     def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, m_inv: torch.Tensor,
-                               w: torch.Tensor) -> torch.Tensor:
+                               w: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
         """A in [0, 1] that best blends the two reads on the person's own clips, each clip read with
         the clips of the other folds as context (clip b is in fold b mod F): the CCHP stepped over
         the clip (its own mean fed back, z the prior mean), the kernel read from the exact
@@ -159,7 +192,7 @@ class PathShapeKernelPolicy(nn.Module):
                 else:
                     in_rows.append(b)
             steps = torch.cat(spans)
-            loo = y[steps] - torch.linalg.solve(m_inv[steps][:, steps], fitted_residual[steps])
+            loo = self._committed(y[steps] - torch.linalg.solve(m_inv[steps][:, steps], fitted_residual[steps]), sizes)
             keep = torch.tensor(in_rows)
             keys, values, z, _ = self.inner.encode_context(
                 x_c[keep][:, :, :self.motion_feature_dim].contiguous(), y_c[keep], m[keep])
@@ -222,7 +255,12 @@ class PathShapeKernelPolicy(nn.Module):
         mean_i, std, h2, c2, read_i, v, query_i = self.inner.step_read(
             x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], keys[:, self._block(k):], values, z)
         q = self._standardise(x_t[self.motion_feature_dim:], keys)
-        read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6]).view(6)
+        read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6])
+        if self.commit_share > 0:
+            extras = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)
+            read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]
+                                     ).to(read_k.dtype)
+        read_k = read_k.view(6)
         a = self._blend(keys)
         mean = a * read_k + (1.0 - a) * mean_i
         read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
@@ -257,7 +295,9 @@ class PathShapeKernelPolicy(nn.Module):
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
-                            encoder: Optional[os.PathLike] = None) -> pathlib.Path:
+                            encoder: Optional[os.PathLike] = None,
+                            commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH)
+                            ) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card
@@ -270,11 +310,12 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
-                                                          encoder_module).eval())
+                                                          encoder_module, tuple(commit)).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
+        **({"commit": list(commit)} if commit[0] > 0 else {}),
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
     if encoder_card is not None:
         card["path_shape_read"]["encoder"] = dict(encoder_card, file=pathlib.Path(encoder).name)
@@ -296,11 +337,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--folds", type=int, default=DEFAULT_CV_FOLDS,
                    help="choose A per context by this many folds of its clips (0: A fixed at --blend)")
     p.add_argument("--rows", type=int, default=DEFAULT_CV_ROWS, help="clips the choice of A steps through, at most")
+    p.add_argument("--commit", type=float, nargs=3, metavar=("SHARE", "LOW", "HIGH"),
+                   default=[DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH],
+                   help="commit SHARE of the kernel read to its dominant command, full from HIGH of its size, "
+                        "none below LOW (SHARE 0: off)")
     p.add_argument("--encoder", default=None,
                    help="a learning.hand_encoder file: the kernel reads the path and shape through it")
     args = p.parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
-                                  args.encoder)
+                                  args.encoder, tuple(args.commit))
     print(f"wrote {out}")
     return 0
 
