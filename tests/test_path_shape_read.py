@@ -96,7 +96,8 @@ def _kernel_read(context, query, bandwidth, lam, embed=lambda s: s):
 
 def test_policy_file_blends_the_cchp_with_a_kernel_read_of_the_context(tmp_path):
     inner_path = _inner_policy(tmp_path)
-    path = build_path_shape_policy(inner_path, tmp_path / "wide.pt", blend=0.7, bandwidth=0.6, lam=0.4, folds=0)
+    path = build_path_shape_policy(inner_path, tmp_path / "wide.pt", blend=0.7, bandwidth=0.6, lam=0.4, folds=0,
+                                   commit=(0.0, 0.2, 0.6))
     module = load_policy(path)  # torch.jit.load alone, with the checks the software makes
     inner = load_policy(inner_path)
     assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
@@ -133,7 +134,8 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     """With --folds, A is the least-squares blend of the two reads over the person's own clips, each
     read with the other folds' clips as context: here the kernel read is refitted from scratch."""
     inner_path = _inner_policy(tmp_path)
-    path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3)
+    path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3,
+                                   commit=(0.0, 0.2, 0.6))
     module, inner = load_policy(path), load_policy(inner_path)
     rng = np.random.default_rng(7)
     context = _pieces(rng, [14, 9, 12, 11, 8])
@@ -252,11 +254,13 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert card["path_shape_read"] == {
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
-        "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
+        "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "features": card["path_shape_read"]["features"]}
     wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
+    assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
+        psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
     rng = np.random.default_rng(5)
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(_pieces(rng, [25, 18])))
     keys, values, z_mu, z_sigma = wide.encode_context(x_c, y_c, mask)
@@ -342,7 +346,7 @@ def test_an_encoder_learned_across_people_is_what_the_kernel_reads(tmp_path, per
             return scripted(torch.from_numpy(np.asarray(s, np.float32))).numpy()
 
     path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", blend=1.0, bandwidth=0.6, lam=0.4,
-                                   folds=0, encoder=enc_path)
+                                   folds=0, encoder=enc_path, commit=(0.0, 0.2, 0.6))
     module = load_policy(path)
     assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
     rng = np.random.default_rng(2)

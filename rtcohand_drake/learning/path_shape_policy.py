@@ -66,7 +66,7 @@ DEFAULT_CV_ROWS = 12
 # Chosen on the 6 recorded development training people, checked on the 4 validation ones
 # (docs/real_people.md, section 6): half the read committed, full from 0.6 of a command, none below 0.2.
 COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH = 0.5, 0.2, 0.6
-DEFAULT_COMMIT_SHARE = 0.0  # the shipped file's
+DEFAULT_COMMIT_SHARE = COMMIT_SHARE  # the shipped file's
 
 
 class PathShapeKernelPolicy(nn.Module):
