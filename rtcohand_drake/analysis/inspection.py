@@ -10,6 +10,7 @@ moment the last face's hold is over.
 from __future__ import annotations
 
 import dataclasses as dc
+import math
 
 import numpy as np
 from pydrake.geometry import Role
@@ -26,16 +27,31 @@ class InspectionResult:
     completion_time: float
 
 
+_NORMALS_E = np.array([face[1] for face in FACES], float)  # (6, 3)
+
+
 def face_angles_deg(poses: np.ndarray, eye_xyz) -> np.ndarray:
-    """(K, 6) angle between each face's outward normal and the line of sight to the eye."""
+    """(K, 6) angle between each face's outward normal and the line of sight to the eye.
+
+    Pose by pose in Python floats: the live monitor (one pose each log period) and the
+    scoring of a whole run log then count with the very same arithmetic."""
     poses = np.atleast_2d(np.asarray(poses, float))
-    R = quaternion_to_matrix(poses[:, 3:7])
-    to_eye = np.asarray(eye_xyz, float) - poses[:, :3]
-    to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
-    normals_E = np.array([face[1] for face in FACES], float)  # (6, 3)
-    normals_W = np.einsum("kij,fj->kfi", R, normals_E)
-    cos = np.clip(np.einsum("kfi,ki->kf", normals_W, to_eye), -1.0, 1.0)
-    return np.degrees(np.arccos(cos))
+    return np.array([_one_pose_face_angles_deg(p, eye_xyz) for p in poses]).reshape(len(poses), len(FACES))
+
+
+def _one_pose_face_angles_deg(pose: np.ndarray, eye_xyz) -> np.ndarray:
+    """(6) `face_angles_deg` of one pose [x y z qw qx qy qz]."""
+    R = quaternion_to_matrix(pose[3:7]).tolist()
+    e = [float(eye_xyz[i]) - float(pose[i]) for i in range(3)]
+    n = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    e = [c / n for c in e]
+    out = []
+    for nx, ny, nz in _NORMALS_E.tolist():
+        cos = 0.0
+        for i in range(3):
+            cos += (R[i][0] * nx + R[i][1] * ny + R[i][2] * nz) * e[i]
+        out.append(math.degrees(math.acos(min(max(cos, -1.0), 1.0))))
+    return np.array(out)
 
 
 MAX_ANGLE_DEG = 35.0

@@ -6,7 +6,20 @@ Numpy only (no Drake), so the data generator uses them too. Quaternions are
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def vector_norm(x: np.ndarray) -> float:
+    """|x| of a 1-D array: numpy's own `linalg.norm` arithmetic (sqrt of x.dot(x)), without its
+    dispatch, for the small vectors of the per-period updates."""
+    return math.sqrt(x.dot(x))
+
+
+def all_close(a: np.ndarray, b: np.ndarray) -> bool:
+    """`np.allclose(a, b)` (rtol 1e-5, atol 1e-8) for finite arrays, without its dispatch."""
+    return bool((np.abs(a - b) <= 1e-8 + 1e-5 * np.abs(b)).all())
 
 
 def quaternion_to_matrix(wxyz: np.ndarray, normalize: bool = True) -> np.ndarray:
@@ -16,6 +29,8 @@ def quaternion_to_matrix(wxyz: np.ndarray, normalize: bool = True) -> np.ndarray
     the generator's own quaternions are unit already and skip it.
     """
     q = np.asarray(wxyz, float)
+    if q.size == 4:  # one quaternion: the same arithmetic on Python floats (a run's monitors call this often)
+        return _one_quaternion_to_matrix(q, normalize).reshape(q.shape[:-1] + (3, 3))
     if normalize:
         q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = np.moveaxis(q, -1, 0)
@@ -24,6 +39,18 @@ def quaternion_to_matrix(wxyz: np.ndarray, normalize: bool = True) -> np.ndarray
         np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
     ], -2)
+
+
+def _one_quaternion_to_matrix(q: np.ndarray, normalize: bool) -> np.ndarray:
+    w, x, y, z = (float(c) for c in q.reshape(4))
+    if normalize:
+        n = float(np.sqrt(w * w + x * x + y * y + z * z))
+        w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:

@@ -106,6 +106,16 @@ def _unit(v: np.ndarray) -> np.ndarray:
         return v / n
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """np.cross of (..., 3) arrays, the same products and differences, without its axis handling
+    (the live source calls `part_frames` on one hand at a time)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def part_frames(keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Part frames of hands given as keypoints (..., 21, 3), metres, in U.
 
@@ -123,8 +133,8 @@ def part_frames(keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     along = kp[..., 9, :] - kp[..., 0, :]
     across = kp[..., 5, :] - kp[..., 17, :]
     py = _unit(along)
-    pz = _unit(np.cross(across, along))
-    px = np.cross(py, pz)
+    pz = _unit(_cross(across, along))
+    px = _cross(py, pz)
     R[..., 0, :, 0] = px
     R[..., 0, :, 1] = py
     R[..., 0, :, 2] = pz
@@ -136,12 +146,12 @@ def part_frames(keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = pz
     ty = fy[..., 0, :]
     tz = _unit(n - np.sum(n * ty, axis=-1, keepdims=True) * ty)
-    tx = np.cross(ty, tz)
+    tx = _cross(ty, tz)
     # Index..pinky: palm across axis as reference.
     a = px[..., None, :]
     gy = fy[..., 1:, :]
     gx = _unit(a - np.sum(a * gy, axis=-1, keepdims=True) * gy)
-    gz = np.cross(gx, gy)
+    gz = _cross(gx, gy)
     R[..., 1, :, 0] = tx
     R[..., 1, :, 1] = ty
     R[..., 1, :, 2] = tz

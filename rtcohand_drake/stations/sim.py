@@ -69,13 +69,14 @@ class VelocityServo(LeafSystem):
 
     def _command(self, context) -> np.ndarray:
         v = self._v_in.Eval(context)
-        return np.where(np.isfinite(v), v, 0.0)  # a NaN command is no command
+        finite = np.isfinite(v)
+        return v if finite.all() else np.where(finite, v, 0.0)  # a NaN command is no command
 
     def _update(self, context, discrete_state):
         q_target = context.get_discrete_state(self._q_target).get_value()
         q_next = q_target + self._dt * self._command(context)
         q = self._q_in.Eval(context)
-        q_next = np.clip(q_next, q - self._max_lead, q + self._max_lead)
+        q_next = np.minimum(np.maximum(q_next, q - self._max_lead), q + self._max_lead)  # np.clip's arithmetic
         discrete_state.set_value(self._q_target, q_next)
 
     def _calc_desired_state(self, context, output: BasicVector):
@@ -87,16 +88,23 @@ class VelocityServo(LeafSystem):
 
 
 class BodyPoseVector(LeafSystem):
-    """Output `pose` (7) = [x y z qw qx qy qz] of one body, from the plant's body poses."""
+    """Output `pose` (7) = [x y z qw qx qy qz] of one body, from the plant's positions.
+
+    Input `positions` (the plant's positions). The plant's own kinematics on a context of
+    this system's (the same calculation as the plant's `body_poses` port, which would hand
+    every body's pose to Python at each evaluation)."""
 
     def __init__(self, plant: MultibodyPlant, body_name: str, model_instance):
         super().__init__()
-        self._index = int(plant.GetBodyByName(body_name, model_instance).index())
-        self._poses = self.DeclareAbstractInputPort("body_poses", plant.get_body_poses_output_port().Allocate())
+        self._plant = plant
+        self._plant_context = plant.CreateDefaultContext()
+        self._body = plant.GetBodyByName(body_name, model_instance)
+        self._q = self.DeclareVectorInputPort("positions", plant.num_positions())
         self.DeclareVectorOutputPort("pose", POSE_DIM, self._calc)
 
     def _calc(self, context, output: BasicVector):
-        output.SetFromVector(pose_vector(self._poses.Eval(context)[self._index]))
+        self._plant.SetPositions(self._plant_context, self._q.Eval(context))
+        output.SetFromVector(pose_vector(self._plant.EvalBodyPoseInWorld(self._plant_context, self._body)))
 
 
 # Actuator torque limits (N·m), Kinova Gen3 published figures (reference/facts.md).
@@ -145,7 +153,8 @@ def make_sim_station(scenario: Scenario, name: str = "gen3_station") -> Diagram:
     builder.Connect(gravity.get_output_port_generalized_force(), plant.get_actuation_input_port(gen3))
 
     workpiece_pose = builder.AddNamedSystem("workpiece_pose", BodyPoseVector(plant, "workpiece", instances["workpiece"]))
-    builder.Connect(plant.get_body_poses_output_port(), workpiece_pose.get_input_port())
+    assert plant.num_positions() == n, "the arm's joints are the plant's only positions"
+    builder.Connect(state_split.get_output_port(0), workpiece_pose.get_input_port())
 
     builder.ExportInput(servo.GetInputPort("velocity_command"), VELOCITY_COMMAND)
     builder.ExportOutput(state_split.get_output_port(0), POSITION_MEASURED)

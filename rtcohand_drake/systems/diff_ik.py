@@ -76,6 +76,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.planning import DofMask, JointLimits, RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.systems.framework import BusValue, LeafSystem
 
+from rtcohand_drake.cell.geometry import vector_norm
 from rtcohand_drake.cell.layout import Cell
 from rtcohand_drake.cell.plant import add_cell_models, make_control_plant
 from rtcohand_drake.interfaces import FOLLOW_STATUS, POSITION_MEASURED, TWIST_COMMAND, TWIST_DIM, VELOCITY_COMMAND
@@ -164,7 +165,7 @@ def unrequested_motion(V_achieved: np.ndarray, V_desired: np.ndarray) -> tuple[f
         achieved, desired = V_achieved[half], V_desired[half]
         dd = float(np.dot(desired, desired))
         share = min(max(float(np.dot(achieved, desired)) / dd, 0.0), 1.0) if dd > 1e-18 else 0.0
-        sizes.append(float(np.linalg.norm(achieved - share * desired)))
+        sizes.append(vector_norm(achieved - share * desired))
     return sizes[0], sizes[1]
 
 
@@ -184,7 +185,7 @@ def clamp_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.
     """Scales v and w separately so |v| <= max_linear and |w| <= max_angular (direction kept)."""
     twist = np.array(twist, dtype=float)
     for part, limit in ((slice(0, 3), max_linear), (slice(3, 6), max_angular)):
-        norm = np.linalg.norm(twist[part])
+        norm = vector_norm(twist[part])
         if norm > limit:
             twist[part] *= limit / norm
     return twist
@@ -341,7 +342,7 @@ class TwistToJointVelocity(LeafSystem):
 
     def solve(self, q: np.ndarray, v_current: np.ndarray, twist_U: np.ndarray) -> tuple[np.ndarray, FollowStatus, float]:
         """One differential-IK step; returns (v_next, status, achieved ratio)."""
-        if not np.all(np.isfinite(twist_U)) or not np.all(np.isfinite(q)):
+        if not np.isfinite(twist_U).all() or not np.isfinite(q).all():
             twist_U = np.zeros(6)
             invalid = True
         else:
@@ -355,7 +356,7 @@ class TwistToJointVelocity(LeafSystem):
             self._plant_context, JacobianWrtVariable.kV, self._frame_E, np.zeros(3),
             self._plant.world_frame(), self._plant.world_frame())
         V = self.desired_spatial_velocity(twist_U)
-        moving = np.linalg.norm(V) > 1e-9
+        moving = vector_norm(V) > 1e-9
         cfg = self._cfg
         dv = cfg.joint_acceleration_rad_s2 * self._dt
         v_qp, clearance = self._solve_qp(q, v_current, V, moving)
@@ -364,8 +365,9 @@ class TwistToJointVelocity(LeafSystem):
             # was closing at most at (d - margin) / approach time, and the stop takes a
             # fraction of that time, so the arm stays clear of the margin.
             return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
-        v_next = np.clip(v_qp, v_current - dv, v_current + dv)
-        v_next = np.clip(v_next, -self.joint_velocity_limit, self.joint_velocity_limit)
+        # np.minimum(np.maximum(...)) is np.clip's arithmetic, without its dispatch.
+        v_next = np.minimum(np.maximum(v_qp, v_current - dv), v_current + dv)
+        v_next = np.minimum(np.maximum(v_next, -self.joint_velocity_limit), self.joint_velocity_limit)
         # Bound the motion beyond the command, and the part's speed itself (the QP's limit is per
         # component, so its norm could reach sqrt(3) times the limit); a slower command is still
         # within every other limit. It comes down no faster than the acceleration limit allows.
@@ -373,11 +375,11 @@ class TwistToJointVelocity(LeafSystem):
         scale = unrequested_scale(V_next, V, cfg.max_unrequested_linear_m_s,
                                   cfg.max_unrequested_angular_rad_s) if moving else 1.0
         for part, limit in ((V_next[3:], cfg.max_linear_speed_m_s), (V_next[:3], cfg.max_angular_speed_rad_s)):
-            speed, cap = float(np.linalg.norm(part)), cfg.speed_cap_fraction * limit
+            speed, cap = vector_norm(part), cfg.speed_cap_fraction * limit
             if speed > cap:
                 scale = min(scale, cap / speed)
         if scale < 1.0:
-            v_next = np.clip(scale * v_next, v_current - dv, v_current + dv)
+            v_next = np.minimum(np.maximum(scale * v_next, v_current - dv), v_current + dv)
             V_next = J @ v_next
         held = False
         if clearance is not None and clearance.size():
@@ -453,8 +455,13 @@ class TwistToJointVelocity(LeafSystem):
         self._padded = []
         clearance = self._checker.CalcRobotClearance(q, cfg.cell_clearance_within_m)
         closest: dict = {}
-        for i, j, d in zip(clearance.robot_indices(), clearance.other_indices(), clearance.distances()):
-            closest[(i, j)] = min(d, closest.get((i, j), np.inf))
+        distances = clearance.distances()
+        inside = np.flatnonzero(distances < cfg.min_cell_clearance_m)  # only these pairs can be padded
+        if inside.size:
+            robot, other = clearance.robot_indices(), clearance.other_indices()
+            for k in inside:
+                i, j, d = robot[k], other[k], distances[k]
+                closest[(i, j)] = min(d, closest.get((i, j), np.inf))
         for (i, j), d in closest.items():
             if d < cfg.min_cell_clearance_m:
                 a, b = self._checker_plant.get_body(i), self._checker_plant.get_body(j)

@@ -39,7 +39,7 @@ class InspectionMonitor(LeafSystem):
         holds = context.get_discrete_state(self._holds).get_value()
         pose = self._pose.Eval(context)
         visible = np.zeros(n, bool)
-        if np.all(np.isfinite(pose)):
+        if np.isfinite(pose).all():
             visible = face_angles_deg(pose, self._eye)[0] <= MAX_ANGLE_DEG
         start, done = advance_holds(holds[:n], holds[n:], context.get_time(), visible)
         discrete_state.set_value(self._holds, np.concatenate([start, done]))
@@ -57,8 +57,9 @@ def until_done(monitor: InspectionMonitor, hold_s: float):
     from pydrake.systems.framework import EventStatus
 
     def check(root):
-        done_at = monitor.inspected_at(monitor.GetMyContextFromRoot(root))
-        if np.all(np.isfinite(done_at)) and root.get_time() >= done_at.max() + hold_s - 1e-9:
+        # Called after every simulator step: read the state in place, no copy.
+        done_at = monitor.GetMyContextFromRoot(root).get_discrete_state(monitor._holds).get_value()[len(FACES):]
+        if np.isfinite(done_at).all() and root.get_time() >= done_at.max() + hold_s - 1e-9:
             return EventStatus.ReachedTermination(monitor, "all six faces inspected")
         return EventStatus.DidNothing()
 

@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from rtcohand_drake.cell.geometry import all_close, vector_norm
 from rtcohand_drake.systems.safety.config import Safety
 
 
@@ -65,7 +66,7 @@ def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarra
 def plausible_features(x: np.ndarray, config: Safety) -> bool:
     """Finite, and no hand part moving faster than a hand can (m/s or rad/s)."""
     x = np.asarray(x, float)
-    return bool(np.all(np.isfinite(x)) and np.max(np.abs(x), initial=0.0) <= config.max_plausible_feature)
+    return bool(np.isfinite(x).all() and (x.size == 0 or np.abs(x).max() <= config.max_plausible_feature))
 
 
 def mold_exit_position(p_W: np.ndarray, zones: Zones) -> np.ndarray | None:
@@ -102,18 +103,20 @@ def mold_exit(twist_U, v_W, p_W, zones: Zones):
 
 def workspace_box(twist_U, v_W, p_W, zones: Zones):
     """Removes velocity that would carry the workpiece centre (looked ahead) out of the workspace box."""
-    ahead = p_W + v_W * zones.config.lookahead_s
+    ahead = (p_W + v_W * zones.config.lookahead_s).tolist()
+    p, lo, hi = np.asarray(p_W).tolist(), zones.box_lo.tolist(), zones.box_hi.tolist()
     acted = False
     for axis in range(3):
-        normal = np.zeros(3)
-        normal[axis] = 1.0
-        if ahead[axis] > zones.box_hi[axis] or p_W[axis] > zones.box_hi[axis]:
-            v_new = remove_outward_component(v_W, normal)
-        elif ahead[axis] < zones.box_lo[axis] or p_W[axis] < zones.box_lo[axis]:
-            v_new = remove_outward_component(v_W, -normal)
+        if ahead[axis] > hi[axis] or p[axis] > hi[axis]:
+            outward = 1.0
+        elif ahead[axis] < lo[axis] or p[axis] < lo[axis]:
+            outward = -1.0
         else:
             continue
-        if not np.allclose(v_new, v_W):
+        normal = np.zeros(3)
+        normal[axis] = outward
+        v_new = remove_outward_component(v_W, normal)
+        if not all_close(v_new, v_W):
             acted = True
         v_W = v_new
     return twist_U, v_W, acted
@@ -122,11 +125,11 @@ def workspace_box(twist_U, v_W, p_W, zones: Zones):
 def inspector_zone(twist_U, v_W, p_W, zones: Zones):
     """Removes motion toward the inspector's eye once the part (looked ahead) is closer than the minimum."""
     to_part = p_W - zones.eye_W
-    distance = np.linalg.norm(to_part)
+    distance = vector_norm(to_part)
     ahead = p_W + v_W * zones.config.lookahead_s
-    if np.linalg.norm(ahead - zones.eye_W) < zones.config.min_inspector_distance_m and distance > 1e-9:
+    if vector_norm(ahead - zones.eye_W) < zones.config.min_inspector_distance_m and distance > 1e-9:
         v_new = remove_outward_component(v_W, -to_part / distance)
-        return twist_U, v_new, not np.allclose(v_new, v_W)
+        return twist_U, v_new, not all_close(v_new, v_W)
     return twist_U, v_W, False
 
 
@@ -159,7 +162,7 @@ def confidence_scale(variance: float, config: Safety) -> float:
     if not np.isfinite(variance):
         return float(config.confidence_floor)
     span = max(config.confidence_floor_variance - config.confidence_full_variance, 1e-9)
-    share = float(np.clip((variance - config.confidence_full_variance) / span, 0.0, 1.0))
+    share = min(max((variance - config.confidence_full_variance) / span, 0.0), 1.0)
     return 1.0 - (1.0 - config.confidence_floor) * share
 
 

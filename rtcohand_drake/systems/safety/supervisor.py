@@ -47,6 +47,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from rtcohand_drake.cell.geometry import all_close, vector_norm
 from rtcohand_drake.systems.diff_ik import clamp_twist
 from rtcohand_drake.cell.layout import Box
 from rtcohand_drake.systems.safety.config import Safety
@@ -110,7 +111,7 @@ class SafetySupervisor(LeafSystem):
             resumes += 1  # a resume: the policy resamples z
         valid, frame_time = self._gesture.Eval(context)
         request = np.asarray(self._request.Eval(context), float)
-        if not np.all(np.isfinite(request)):
+        if not np.isfinite(request).all():
             acted |= Intervention.NON_FINITE
         stale = (valid < 0.5) or not np.isfinite(frame_time) or (t - frame_time > cfg.stale_after_s) \
             or bool(acted & Intervention.NON_FINITE)
@@ -134,20 +135,20 @@ class SafetySupervisor(LeafSystem):
 
         if ramp_s is not None:
             if mode == Mode.RUNNING:  # a ramp to zero starts here; a pause <-> watchdog switch keeps it
-                ramp_v, ramp_w = np.linalg.norm(command[:3]), np.linalg.norm(command[3:])
+                ramp_v, ramp_w = vector_norm(command[:3]), vector_norm(command[3:])
             command = self._ramp_to_zero(command, ramp_v, ramp_w, ramp_s)
         else:
-            s = float(np.clip(sensitivity if np.isfinite(sensitivity) else cfg.sensitivity_default,
-                              cfg.sensitivity_min, cfg.sensitivity_max))
+            s = min(max(float(sensitivity) if np.isfinite(sensitivity) else cfg.sensitivity_default,
+                        cfg.sensitivity_min), cfg.sensitivity_max)
             target = s * confidence * request
             clamped = clamp_twist(target, cfg.max_linear_speed_m_s, cfg.max_angular_speed_rad_s)
-            if not np.allclose(clamped, target):
+            if not all_close(clamped, target):
                 acted |= Intervention.SPEED_CLAMP
             step = self._accel_step()
             command = command + np.clip(clamped - command, -step, step)
         # The zone rules act on the command actually sent, whatever the mode.
         pose = self._pose.Eval(context)
-        if np.all(np.isfinite(pose)):
+        if np.isfinite(pose).all():
             command, zones = self.limit_to_zones(command, pose[:3])
             acted |= zones
         else:
@@ -163,7 +164,7 @@ class SafetySupervisor(LeafSystem):
         """Shrinks v and w toward zero, each at the rate that ends the ramp in `ramp_s`."""
         out = command.copy()
         for part, start in ((slice(0, 3), from_v), (slice(3, 6), from_w)):
-            norm = np.linalg.norm(out[part])
+            norm = vector_norm(out[part])
             if norm <= 1e-12:
                 out[part] = 0.0
                 continue
