@@ -282,6 +282,7 @@ class TwistToJointVelocity(LeafSystem):
         self.joint_position_limits = (lower + margin, upper - margin)
         self.joint_velocity_limit = cfg.joint_velocity_fraction * self._plant.GetVelocityUpperLimits()
         self._position_limits = (lower, upper)
+        self._no_acceleration_limits = (np.full(n, -np.inf), np.full(n, np.inf))
 
         self._checker, self._checker_plant = make_collision_checker(cell)
         self._padded: list = []
@@ -332,8 +333,7 @@ class TwistToJointVelocity(LeafSystem):
         return self._system
 
     def _joint_limits(self, v_lower: np.ndarray, v_upper: np.ndarray) -> JointLimits:
-        n = len(v_lower)
-        return JointLimits(*self._position_limits, v_lower, v_upper, np.full(n, -np.inf), np.full(n, np.inf))
+        return JointLimits(*self._position_limits, v_lower, v_upper, *self._no_acceleration_limits)
 
     def desired_spatial_velocity(self, twist_U: np.ndarray) -> np.ndarray:
         """[w_W; v_W] (Drake's spatial-velocity order) for a user-frame twist [v_U; w_U]."""
@@ -421,30 +421,42 @@ class TwistToJointVelocity(LeafSystem):
     def _velocity_bounds(self, q, v_current):
         """The bounds to give Drake's JointVelocityLimitConstraint so that, after it cuts the
         bound toward the nearer position limit by its factor s, the QP sees the speed limit
-        (cut by s) intersected with what the acceleration limit allows this period."""
+        (cut by s) intersected with what the acceleration limit allows this period.
+
+        Joint by joint on Python floats (seven joints: numpy's dispatch would cost more than
+        the arithmetic); the operations are those of the vector form."""
         cfg = self._cfg
-        v_max = self.joint_velocity_limit
         dv = cfg.joint_acceleration_rad_s2 * self._dt
-        lo, hi = np.maximum(-v_max, v_current - dv), np.minimum(v_max, v_current + dv)
+        margin, influence = cfg.joint_position_margin_rad, cfg.joint_position_influence_rad
         lower, upper = self._position_limits
-        to_lower, to_upper = q - lower, upper - q
-        near_upper = to_upper < to_lower  # the side Drake cuts (Drake's own test)
-        s = np.clip((np.minimum(to_lower, to_upper) - cfg.joint_position_margin_rad)
-                    / (cfg.joint_position_influence_rad - cfg.joint_position_margin_rad), 0.0, 1.0)
-        # The cut bound, but never so tight that slowing down at the acceleration limit is
-        # ruled out (a joint the servo's lag carried in too fast); the clip after the QP holds.
-        hi = np.where(near_upper, np.maximum(np.minimum(hi, v_max * s), lo + 1e-9), hi)
-        lo = np.where(near_upper, lo, np.minimum(np.maximum(lo, -v_max * s), hi - 1e-9))
-        # A positive cut bound is passed divided by s, so that Drake's cut gives it back; a
-        # bound of the other sign Drake only loosens toward 0 (the clip after the QP holds);
-        # at s = 0 Drake's bound is 0, so the other bound must allow 0.
-        cut = s > 0
-        safe = np.where(cut, s, 1.0)
-        hi_passed = np.where(near_upper & cut & (hi > 0), hi / safe, hi)
-        lo_passed = np.where(~near_upper & cut & (lo < 0), lo / safe, lo)
-        lo_passed = np.where(near_upper & ~cut, np.minimum(lo, 0.0), lo_passed)
-        hi_passed = np.where(~near_upper & ~cut, np.maximum(hi, 0.0), hi_passed)
-        return lo_passed, hi_passed
+        lo_out, hi_out = [], []
+        for qj, vj, v_max, low, up in zip(np.asarray(q, float).tolist(), np.asarray(v_current, float).tolist(),
+                                          self.joint_velocity_limit.tolist(), lower.tolist(), upper.tolist()):
+            lo, hi = max(-v_max, vj - dv), min(v_max, vj + dv)
+            to_lower, to_upper = qj - low, up - qj
+            near_upper = to_upper < to_lower  # the side Drake cuts (Drake's own test)
+            s = min(max((min(to_lower, to_upper) - margin) / (influence - margin), 0.0), 1.0)
+            # The cut bound, but never so tight that slowing down at the acceleration limit is
+            # ruled out (a joint the servo's lag carried in too fast); the clip after the QP holds.
+            if near_upper:
+                hi = max(min(hi, v_max * s), lo + 1e-9)
+            else:
+                lo = min(max(lo, -v_max * s), hi - 1e-9)
+            # A positive cut bound is passed divided by s, so that Drake's cut gives it back; a
+            # bound of the other sign Drake only loosens toward 0 (the clip after the QP holds);
+            # at s = 0 Drake's bound is 0, so the other bound must allow 0.
+            if s > 0:
+                if near_upper and hi > 0:
+                    hi = hi / s
+                elif not near_upper and lo < 0:
+                    lo = lo / s
+            elif near_upper:
+                lo = min(lo, 0.0)
+            else:
+                hi = max(hi, 0.0)
+            lo_out.append(lo)
+            hi_out.append(hi)
+        return np.array(lo_out), np.array(hi_out)
 
     def _hold_pairs_inside_margin(self, q):
         """Pads each robot-cell body pair already inside the margin up to it (held, not pushed);

@@ -38,6 +38,7 @@ class KeypointGestureSource(LeafSystem):
     def __init__(self, rate_hz: float = 10.0):
         super().__init__()
         self.period_s = 1.0 / rate_hz
+        self._last_frames = None  # (skeleton, its part frames): see `_part_frames`
         self._prev = self.DeclareDiscreteState(np.concatenate([NAN_HAND.reshape(-1), [np.nan]]))
         self._features = self.DeclareDiscreteState(FEATURE_DIM)
         self._status = self.DeclareDiscreteState(np.array([0.0, -np.inf]))
@@ -58,8 +59,8 @@ class KeypointGestureSource(LeafSystem):
         features, valid = np.zeros(36), False
         if np.isfinite(t_frame) and np.isfinite(t_prev) and t_frame > t_prev \
                 and np.all(np.isfinite(kp)) and np.all(np.isfinite(kp_prev)):
-            R0, o0 = part_frames(kp_prev)
-            R1, o1 = part_frames(kp)
+            R0, o0 = self._part_frames(kp_prev)
+            R1, o1 = self._part_frames(kp)
             x = part_velocities(R0, o0, R1, o1, t_frame - t_prev)
             if np.all(np.isfinite(x)):
                 features, valid = x, True
@@ -71,6 +72,16 @@ class KeypointGestureSource(LeafSystem):
         discrete_state.set_value(self._status, [1.0 if valid else 0.0, frame_time])
         if fresh:
             discrete_state.set_value(self._prev, np.concatenate([kp.reshape(-1), [t_frame]]))
+
+    def _part_frames(self, kp: np.ndarray):
+        """`part_frames` of one skeleton; the last skeleton's are kept, since each update's previous
+        skeleton is the one before's current (a cache keyed by the values, so any context may use it)."""
+        cached = self._last_frames
+        if cached is not None and np.array_equal(cached[0], kp):
+            return cached[1], cached[2]
+        R, o = part_frames(kp)
+        self._last_frames = (kp.copy(), R, o)
+        return R, o
 
     def _calc_keypoints(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._prev).get_value()[:63])
