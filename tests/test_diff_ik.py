@@ -187,6 +187,24 @@ def test_non_finite_twist_is_treated_as_zero(controller):
     assert status == FollowStatus.INVALID_INPUT
 
 
+def test_non_finite_joint_angles_bring_the_joints_down_at_the_acceleration_limit(scenario, controller):
+    """A corrupt measurement (NaN or inf joint angles) while moving: the joints slow at the
+    acceleration limit, toward rest, and the plant is never given the angles (Drake would stop
+    the process)."""
+    dv = scenario.diff_ik.joint_acceleration_rad_s2 * scenario.control_period_s
+    v = np.array([0.3, -0.3, 0.5 * dv, 0.0, -0.5 * dv, 0.2, -0.2])
+    for bad in (np.nan, np.inf):
+        q = Q_FREE.copy()
+        q[3] = bad
+        v_next, status, _ = controller.solve(q, v, np.array([0.05, 0, 0, 0, 0, 0]))
+        assert status == FollowStatus.INVALID_INPUT
+        expected = [0.3 - dv, -0.3 + dv, 0.0, 0.0, 0.0, 0.2 - dv, -0.2 + dv]
+        assert np.allclose(v_next, expected, atol=1e-12), v_next
+    # the controller still answers on good angles afterwards
+    v_next, status, _ = controller.solve(Q_FREE, np.zeros(7), np.zeros(6))
+    assert status == FollowStatus.FOLLOWING and not v_next.any()
+
+
 def test_the_qp_is_drakes_system(controller):
     assert isinstance(controller.drake_system, DifferentialInverseKinematicsSystem)
     assert controller.drake_system.recipe().num_ingredients() == 6  # costs: 3, constraints: 3

@@ -341,8 +341,16 @@ class TwistToJointVelocity(LeafSystem):
         return np.concatenate([R @ twist_U[3:6], R @ twist_U[0:3]])
 
     def solve(self, q: np.ndarray, v_current: np.ndarray, twist_U: np.ndarray) -> tuple[np.ndarray, FollowStatus, float]:
-        """One differential-IK step; returns (v_next, status, achieved ratio)."""
-        if not np.isfinite(twist_U).all() or not np.isfinite(q).all():
+        """One differential-IK step; returns (v_next, status, achieved ratio).
+
+        A non-finite twist is no command. With non-finite joint angles (a corrupt measurement)
+        nothing about the arm is known: the joints come down at the acceleration limit and
+        the plant is never given those angles."""
+        if not np.isfinite(q).all():
+            dv = self._cfg.joint_acceleration_rad_s2 * self._dt
+            v_current = np.where(np.isfinite(v_current), v_current, 0.0)
+            return v_current - np.clip(v_current, -dv, dv), FollowStatus.INVALID_INPUT, 0.0
+        if not np.isfinite(twist_U).all():
             twist_U = np.zeros(6)
             invalid = True
         else:
