@@ -268,6 +268,7 @@ class TwistToJointVelocity(LeafSystem):
         cfg = config
         self._cfg = cfg
         self._dt = control_period_s
+        self._dv = cfg.joint_acceleration_rad_s2 * control_period_s  # the most a joint's speed changes a period
         self._q_nominal = np.asarray(q_nominal_rad, float)
         n = self._plant.num_velocities()
         assert n == 7, "the control plant must have exactly the arm's 7 degrees of freedom"
@@ -347,9 +348,7 @@ class TwistToJointVelocity(LeafSystem):
         nothing about the arm is known: the joints come down at the acceleration limit and
         the plant is never given those angles."""
         if not np.isfinite(q).all():
-            dv = self._cfg.joint_acceleration_rad_s2 * self._dt
-            v_current = np.where(np.isfinite(v_current), v_current, 0.0)
-            return v_current - np.clip(v_current, -dv, dv), FollowStatus.INVALID_INPUT, 0.0
+            return self._come_down(v_current), FollowStatus.INVALID_INPUT, 0.0
         if not np.isfinite(twist_U).all():
             twist_U = np.zeros(6)
             invalid = True
@@ -365,14 +364,13 @@ class TwistToJointVelocity(LeafSystem):
             self._plant.world_frame(), self._plant.world_frame())
         V = self.desired_spatial_velocity(twist_U)
         moving = vector_norm(V) > 1e-9
-        cfg = self._cfg
-        dv = cfg.joint_acceleration_rad_s2 * self._dt
+        cfg, dv = self._cfg, self._dv
         v_qp, clearance = self._solve_qp(q, v_current, V, moving)
         if v_qp is None:
             # Come down at the acceleration limit rather than at once. Every gap to the cell
             # was closing at most at (d - margin) / approach time, and the stop takes a
             # fraction of that time, so the arm stays clear of the margin.
-            return v_current - np.clip(v_current, -dv, dv), FollowStatus.NO_SOLUTION, 0.0
+            return self._come_down(v_current), FollowStatus.NO_SOLUTION, 0.0
         # np.minimum(np.maximum(...)) is np.clip's arithmetic, without its dispatch.
         v_next = np.minimum(np.maximum(v_qp, v_current - dv), v_current + dv)
         v_next = np.minimum(np.maximum(v_next, -self.joint_velocity_limit), self.joint_velocity_limit)
@@ -407,6 +405,12 @@ class TwistToJointVelocity(LeafSystem):
             status = FollowStatus.FOLLOWING
         return v_next, status, ratio
 
+    def _come_down(self, v_current: np.ndarray) -> np.ndarray:
+        """The joint speeds one period nearer rest at the acceleration limit (a non-finite speed
+        counts as rest)."""
+        v = np.where(np.isfinite(v_current), v_current, 0.0)
+        return v - np.clip(v, -self._dv, self._dv)
+
     def _solve_qp(self, q, v_current, V, moving):
         """Drake's answer (None when its QP failed) and the clearance it was given (or None)."""
         self._joint_velocity.SetJointLimits(self._joint_limits(*self._velocity_bounds(q, v_current)))
@@ -433,8 +437,7 @@ class TwistToJointVelocity(LeafSystem):
 
         Joint by joint on Python floats (seven joints: numpy's dispatch would cost more than
         the arithmetic); the operations are those of the vector form."""
-        cfg = self._cfg
-        dv = cfg.joint_acceleration_rad_s2 * self._dt
+        cfg, dv = self._cfg, self._dv
         margin, influence = cfg.joint_position_margin_rad, cfg.joint_position_influence_rad
         lower, upper = self._position_limits
         lo_out, hi_out = [], []
