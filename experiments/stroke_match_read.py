@@ -33,11 +33,11 @@ SCALE = np.array([0.12] * 3 + [0.6] * 3)
 BIG = 1e18  # a cost no path reaches
 
 
-def frames(x: np.ndarray, rate_hz: float = 10.0) -> np.ndarray:
-    """(T, 102): shape now (63), the centre's velocity (3) and the 36 hand-part velocities, from features
-    whose path and shape have lags of 0 and 1 step."""
+def frames(x: np.ndarray, lag_s: float) -> np.ndarray:
+    """(T, 102): shape now (63), the centre's velocity over lag_s (3) and the 36 hand-part velocities,
+    from features whose path and shape have lags of 0 and lag_s first."""
     now, before = x[:, 36:99], x[:, 99:162]
-    vel = (now.reshape(-1, 21, 3).mean(1) - before.reshape(-1, 21, 3).mean(1)) * rate_hz
+    vel = (now.reshape(-1, 21, 3).mean(1) - before.reshape(-1, 21, 3).mean(1)) / lag_s
     return np.hstack([now, vel, x[:, :36]])
 
 
@@ -101,6 +101,8 @@ def main(argv=None) -> int:
     p.add_argument("--data", nargs="+", required=True)
     p.add_argument("--velocity-weights", type=float, nargs="+", default=[0.0, 5.0, 20.0])
     p.add_argument("--parts-weights", type=float, nargs="+", default=[0.0])
+    p.add_argument("--velocity-lag-s", type=float, default=0.1,
+                   help="the centre's velocity over this time (0.4: the path-and-shape features' first lag)")
     p.add_argument("--taus", type=float, nargs="+", default=[0.05, 0.2])
     p.add_argument("--top", type=int, default=6)
     p.add_argument("--blends", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0])
@@ -108,7 +110,7 @@ def main(argv=None) -> int:
     for path in args.data:
         episodes = evaluation_episodes(load_clips(path, 10.0, path_shape=True), "Person", 0)
         original = dataset.path_shape_features
-        dataset.path_shape_features = functools.partial(path_shape_features, lags_s=(0.0, 0.1))
+        dataset.path_shape_features = functools.partial(path_shape_features, lags_s=(0.0, args.velocity_lag_s))
         try:
             lagged = evaluation_episodes(load_clips(path, 10.0, path_shape=True), "Person", 0)
         finally:
@@ -123,13 +125,13 @@ def main(argv=None) -> int:
             if user not in kernels:
                 kernels[user] = KernelReference(0.5, 0.3, start=0).fit(
                     [(np.asarray(x)[:, 36:], np.nan_to_num(yy)) for x, yy in e.context])
-                ctx = [(frames(np.asarray(x, np.float64)), np.nan_to_num(np.asarray(yy, np.float64)))
+                ctx = [(frames(np.asarray(x, np.float64), args.velocity_lag_s), np.nan_to_num(np.asarray(yy, np.float64)))
                        for x, yy in el.context]
                 matches[user] = {(vw, tau, pw): StrokeMatch(ctx, vw, tau, pw) for vw in args.velocity_weights
                                  for tau in args.taus for pw in args.parts_weights}
             k = committed(kernels[user].predict(np.asarray(e.target_features)[:, 36:]), 0.5, 0.2, 0.6)
             errors.setdefault("kernel read, committed", []).append(np.mean((k - y) ** 2))
-            stream = frames(np.asarray(el.target_features, np.float64))
+            stream = frames(np.asarray(el.target_features, np.float64), args.velocity_lag_s)
             for (vw, tau, pw), m in matches[user].items():
                 r = m.read(stream)
                 for b in args.blends:

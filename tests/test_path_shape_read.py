@@ -16,6 +16,7 @@ from rtcohand_drake.learning.path_shape_policy import PathShapeKernelPolicy, bui
 from rtcohand_drake.learning.policy_file import load_policy
 
 LAGS = (0, 4, 8, 12, 16)  # 0, 0.4, .. 1.6 s at 10 Hz
+NO_MATCH = (0.0, 50.0, 0.05)  # the kernel read alone, without the stroke matched by a time warp
 
 
 def _expected_path_shape(samples, median):
@@ -97,7 +98,7 @@ def _kernel_read(context, query, bandwidth, lam, embed=lambda s: s):
 def test_policy_file_blends_the_cchp_with_a_kernel_read_of_the_context(tmp_path):
     inner_path = _inner_policy(tmp_path)
     path = build_path_shape_policy(inner_path, tmp_path / "wide.pt", blend=0.7, bandwidth=0.6, lam=0.4, folds=0,
-                                   commit=(0.0, 0.2, 0.6))
+                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH)
     module = load_policy(path)  # torch.jit.load alone, with the checks the software makes
     inner = load_policy(inner_path)
     assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
@@ -135,7 +136,7 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     read with the other folds' clips as context: here the kernel read is refitted from scratch."""
     inner_path = _inner_policy(tmp_path)
     path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3,
-                                   commit=(0.0, 0.2, 0.6))
+                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH)
     module, inner = load_policy(path), load_policy(inner_path)
     rng = np.random.default_rng(7)
     context = _pieces(rng, [14, 9, 12, 11, 8])
@@ -255,12 +256,16 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
+        "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
         "features": card["path_shape_read"]["features"]}
     wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
+    assert (wide.match_share, wide.match_velocity_weight, wide.match_tau) == (0.25, 50.0, 0.05) == (
+        psp.DEFAULT_MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU)
+    assert int(wide.hidden_size) == int(inner.hidden_size) + 6 + psp.MATCH_MAX_STEPS
     rng = np.random.default_rng(5)
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(_pieces(rng, [25, 18])))
     keys, values, z_mu, z_sigma = wide.encode_context(x_c, y_c, mask)
@@ -346,7 +351,7 @@ def test_an_encoder_learned_across_people_is_what_the_kernel_reads(tmp_path, per
             return scripted(torch.from_numpy(np.asarray(s, np.float32))).numpy()
 
     path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", blend=1.0, bandwidth=0.6, lam=0.4,
-                                   folds=0, encoder=enc_path, commit=(0.0, 0.2, 0.6))
+                                   folds=0, encoder=enc_path, commit=(0.0, 0.2, 0.6), match=NO_MATCH)
     module = load_policy(path)
     assert int(module.feature_dim) == FEATURE_DIM + PATH_SHAPE_DIM
     rng = np.random.default_rng(2)
@@ -462,7 +467,7 @@ def test_a_committed_read_is_the_kernel_reads_dominant_command_at_its_size(tmp_p
     below LOW: checked against the same written out in numpy, step by step."""
     share, low, high = 0.5, 0.2, 0.6
     path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", blend=1.0, bandwidth=0.6, lam=0.4,
-                                   folds=0, commit=(share, low, high))
+                                   folds=0, commit=(share, low, high), match=NO_MATCH)
     module = load_policy(path)
     rng = np.random.default_rng(3)
     context, (target, _) = _pieces(rng, [30, 22, 17]), _pieces(rng, [12])[0]
@@ -494,3 +499,90 @@ def test_a_committed_read_is_the_kernel_reads_dominant_command_at_its_size(tmp_p
     assert read_model_card(path)["path_shape_read"]["commit"] == [share, low, high]
     with pytest.raises(InputError, match="commit needs"):
         build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", commit=(0.5, 0.6, 0.2))
+
+
+def _time_warp_read(context, stream, velocity_weight, tau):
+    """The stroke matched against each context clip, written out in numpy from its definition: each
+    frame is the shape about the centre now (63) and the centre's velocity over 0.4 s (3), standardised
+    by the context's frames; a match starts at a clip's first step at any step of the stream and
+    advances by (1, 1), (1, 0) or (1, 2), the one of least mean cost per matched step; each clip's best
+    step (least mean cost) gives its labels, weighted by exp(-(its cost - the best clip's) / tau)."""
+    def frames(x):
+        p = x[:, FEATURE_DIM:].astype(np.float64)
+        return np.hstack([p[:, :63], -p[:, 63:126].reshape(-1, 21, 3).mean(1) / 0.4])
+
+    f_all = np.concatenate([frames(x) for x, _ in context])
+    mean, spread = f_all.mean(0), f_all.std(0) + 1e-6
+    weight = np.r_[np.ones(63), np.full(3, velocity_weight)]
+    weight /= weight.sum()
+    clips = [((frames(x) - mean) / spread, y.astype(np.float64)) for x, y in context]
+    paths = [[None] * len(f) for f, _ in clips]  # (cost, length) of the best match ending at each step
+    reads = []
+    for q in (frames(stream) - mean) / spread:
+        best = []
+        for k, (f, y) in enumerate(clips):
+            d = ((f - q) ** 2) @ weight
+            before = paths[k]
+            now = []
+            for j in range(len(f)):
+                options = [(0.0, 0)] if j == 0 else []  # a fresh start at the clip's first step
+                for jj in (j - 1, j, j - 2):
+                    if 0 <= jj and before[jj] is not None:
+                        options.append(before[jj])
+                if not options:  # no match reaches this step yet
+                    now.append(None)
+                    continue
+                cost, length = min(options, key=lambda o: (o[0] + d[j]) / (o[1] + 1))
+                now.append((cost + d[j], length + 1))
+            paths[k] = now
+            mean_cost = [np.inf if o is None else o[0] / o[1] for o in now]
+            j = int(np.argmin(mean_cost))
+            best.append((mean_cost[j], y[j]))
+        costs = np.array([c for c, _ in best])
+        w = np.exp(-(costs - costs.min()) / tau)
+        reads.append((w[:, None] * np.array([y for _, y in best])).sum(0) / w.sum())
+    return np.array(reads)
+
+
+def test_the_stroke_matched_by_a_time_warp_reads_as_its_definition(tmp_path):
+    """With --match SHARE W TAU, SHARE of the kernel read is replaced by the stroke's time-warped match
+    against each context clip: with SHARE 1 and A = 1 the file reads the match alone, checked step by
+    step against the same written out in numpy; its state rides in h and c after the CCHP's, a new
+    stream (h = c = 0) starts afresh, and a context longer than the state holds is read by the kernel
+    alone."""
+    from rtcohand_drake.learning import path_shape_policy as psp
+
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "match.pt", blend=1.0, folds=0,
+                                   commit=(0.0, 0.2, 0.6), match=(1.0, 20.0, 0.1))
+    module = load_policy(path)
+    base = int(load_policy(tmp_path / "inner.pt").hidden_size) + 6  # the CCHP's state and its own mean
+    rng = np.random.default_rng(11)
+    context = _pieces(rng, [9, 14, 11, 7])
+    stream = np.concatenate([context[1][0][:6], context[3][0][2:], _pieces(rng, [4])[0][0]])
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+    expected = _time_warp_read(context, stream, 20.0, 0.1)
+    H = int(module.hidden_size)
+    assert H == base + psp.MATCH_MAX_STEPS
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    with torch.no_grad():
+        for t, x in enumerate(stream):
+            y, _, h, c, _ = module.step(torch.from_numpy(x), y, h, c, keys, values, z_mu)
+            assert np.allclose(y.numpy(), expected[t], atol=1e-5), (t, y.numpy(), expected[t])
+    assert np.abs(expected).max() > 0.05 and len({tuple(np.round(r, 6)) for r in expected}) > 5
+    assert float(c[base:].max()) > 1 and float(c[base + 41:].abs().max()) == 0.0  # lengths of the 41 steps only
+    # A context longer than the state holds: the kernel read alone (as the file without the match).
+    alone = load_policy(build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "alone.pt", blend=1.0, folds=0,
+                                                commit=(0.0, 0.2, 0.6), match=NO_MATCH))
+    long_context = _pieces(rng, [psp.MATCH_MAX_STEPS // 2 + 1, psp.MATCH_MAX_STEPS // 2])
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(long_context))
+    with torch.no_grad():
+        keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+        keys_a, values_a, z_a, _ = alone.encode_context(x_c, y_c, mask)
+        y, _, h, c, _ = module.step(torch.from_numpy(stream[0]), torch.zeros(6), torch.zeros(H), torch.zeros(H),
+                                    keys, values, z_mu)
+        y_a, _, _, _, _ = alone.step(torch.from_numpy(stream[0]), torch.zeros(6), torch.zeros(H - psp.MATCH_MAX_STEPS),
+                                     torch.zeros(H - psp.MATCH_MAX_STEPS), keys_a, values_a, z_a)
+    assert torch.allclose(y, y_a, atol=1e-6) and float(c[base:].abs().max()) == 0.0
+    with pytest.raises(InputError, match="match needs"):
+        build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", match=(0.5, 50.0, 0.0))

@@ -67,6 +67,16 @@ DEFAULT_CV_ROWS = 12
 # (docs/real_people.md, section 6): half the read committed, full from 0.6 of a command, none below 0.2.
 COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH = 0.5, 0.2, 0.6
 DEFAULT_COMMIT_SHARE = COMMIT_SHARE  # the shipped file's
+# The stroke matched against each context clip with a time warp (docs/real_people.md, section 6):
+# its share of the kernel read, the weight of each of the centre's 3 velocity values against 1 for
+# each of the 63 shape values, and tau of the softmin over clips. Chosen on the 6 recorded
+# development training people, checked on the 4 validation ones.
+MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU = 0.25, 50.0, 0.05
+DEFAULT_MATCH_SHARE = MATCH_SHARE  # the shipped file's
+MATCH_MAX_STEPS = 4096  # context steps the time warp's state has room for; a longer context is read without it
+MATCH_FRAME_DIM = 66  # the hand's shape about its centre (63) and the centre's velocity over 0.4 s (3)
+MATCH_COLUMNS = MATCH_FRAME_DIM + 6 + 2  # a context step's frame, label, position in its clip and clip
+MATCH_NONE = 1e18  # the cost of a match that cannot be made
 
 
 class PathShapeKernelPolicy(nn.Module):
@@ -74,7 +84,8 @@ class PathShapeKernelPolicy(nn.Module):
 
     def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
                  folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None,
-                 commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH)):
+                 commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH),
+                 match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU)):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -83,6 +94,8 @@ class PathShapeKernelPolicy(nn.Module):
                              f"got {blend}, {bandwidth}, {lam}, {folds}, {rows}")
         if not (0.0 <= commit[0] <= 1.0 and 0.0 <= commit[1] < commit[2]):
             raise InputError(f"commit needs a share in [0, 1] and 0 <= low < high; got {tuple(commit)}")
+        if not (0.0 <= match[0] <= 1.0 and match[1] >= 0 and match[2] > 0):
+            raise InputError(f"match needs a share in [0, 1], a velocity weight >= 0 and tau > 0; got {tuple(match)}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         self.inner_query_size = int(inner.query_size)
@@ -92,7 +105,15 @@ class PathShapeKernelPolicy(nn.Module):
         self.shape_dim = PATH_SHAPE_DIM if encoder is None else int(encoder.embed_dim)
         self.motion_feature_dim = FEATURE_DIM
         self.feature_dim = FEATURE_DIM + PATH_SHAPE_DIM
-        self.hidden_size = self.inner_hidden + 6
+        # The time warp's state: each context step's best match cost (in h) and length (in c).
+        self.match_share = float(match[0])
+        self.match_velocity_weight = float(match[1])
+        self.match_tau = float(match[2])
+        self.match_max_steps = MATCH_MAX_STEPS if self.match_share > 0 else 0
+        self.match_frame_dim = MATCH_FRAME_DIM
+        self.match_columns = MATCH_COLUMNS
+        self.match_none = MATCH_NONE
+        self.hidden_size = self.inner_hidden + 6 + self.match_max_steps
         self.latent_dim = int(inner.latent_dim)
         self.motion_dim = 6
         self.attention_heads = 1
@@ -107,11 +128,28 @@ class PathShapeKernelPolicy(nn.Module):
         self.commit_share = float(commit[0])
         self.commit_low = float(commit[1])
         self.commit_high = float(commit[2])
-        self.extra_size = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
+        # Extras: the standardisation's mean and spread, b, A, [the command sizes], [the match frame's
+        # mean and spread, and 1 where the context fits the match's state].
+        self.match_extras_at = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
+        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0)
+
+    def _extras_end(self, k: int) -> int:
+        return k + self.shape_dim + 6 + (self.extra_size + k - 1) // k
+
+    def _extras(self, keys: torch.Tensor) -> torch.Tensor:
+        k = keys.size(0)
+        return keys[:, k + self.shape_dim + 6:self._extras_end(k)].reshape(-1)
 
     def _block(self, k: int) -> int:
-        """Columns of the kernel read's part of the keys, for K context steps."""
-        return k + self.shape_dim + 6 + (self.extra_size + k - 1) // k
+        """Columns of the kernel read's part of the keys (and the match's), for K context steps."""
+        return self._extras_end(k) + (self.match_columns if self.match_share > 0 else 0)
+
+    def _match_frames(self, p: torch.Tensor) -> torch.Tensor:
+        """(N, 66) match frames of path-and-shape rows (N, PATH_SHAPE_DIM): the shape about the centre
+        now, and the centre's velocity over the first lag (0.4 s: the keypoints then about the centre now
+        average to minus its displacement)."""
+        n = p.size(0)
+        return torch.cat([p[:, :63], -p[:, 63:126].reshape(n, 21, 3).mean(1) / 0.4], 1)
 
     @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
@@ -141,13 +179,28 @@ class PathShapeKernelPolicy(nn.Module):
         blend = torch.full((1,), self.kernel_blend, dtype=torch.float64)
         if self.blend_folds > 0 and x_c.size(0) > 1:
             blend = self._cross_validated_blend(x_c, y_c, m, m_inv, w, sizes).view(1)
-        extra_cols = self._block(k) - (k + self.shape_dim + 6)
+        extra_cols = self._extras_end(k) - (k + self.shape_dim + 6)
         extras = torch.zeros(k * extra_cols, dtype=torch.float64)
         parts = [mean, spread, width.view(1), blend]
         if self.commit_share > 0:
             parts.append(sizes)
+        blocks = [m_inv, s, w]
+        if self.match_share > 0:
+            f = self._match_frames(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0
+                                                    ).to(torch.float64))
+            f_mean = f.mean(0)
+            f_spread = f.std(0, unbiased=False) + 1e-6
+            position = (torch.cumsum(m.to(torch.int64), 1) - 1)[m].to(torch.float64)
+            clip = torch.arange(m.size(0)).view(-1, 1).expand(m.size(0), m.size(1))[m].to(torch.float64)
+            fits = torch.ones(1, dtype=torch.float64) if k <= self.match_max_steps else torch.zeros(1, dtype=torch.float64)
+            parts += [f_mean, f_spread, fits]
+            match_block = torch.cat([(f - f_mean) / f_spread, y_all, position.view(-1, 1), clip.view(-1, 1)], 1)
+        else:
+            match_block = torch.zeros(k, 0, dtype=torch.float64)
         extras[:self.extra_size] = torch.cat(parts)
-        keys = torch.cat([m_inv, s, w, extras.view(k, extra_cols)], 1).to(torch.float32)
+        blocks.append(extras.view(k, extra_cols))
+        blocks.append(match_block)
+        keys = torch.cat(blocks, 1).to(torch.float32)
         return torch.cat([keys, keys_in], 1), values, z_mu, z_sigma
 
     def _committed(self, r: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
@@ -216,19 +269,17 @@ class PathShapeKernelPolicy(nn.Module):
         return torch.clamp(num / den, 0.0, 1.0)
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
-        k = keys.size(0)
-        return keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim + 1]
+        return self._extras(keys)[2 * self.shape_dim + 1]
 
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
         """k (1, K) of a standardised query (1, shape_dim)."""
         k = keys.size(0)
         s = keys[:, k:k + self.shape_dim]
-        width = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)[2 * self.shape_dim]
+        width = self._extras(keys)[2 * self.shape_dim]
         return torch.exp(-torch.cdist(q, s) ** 2 / (2.0 * width ** 2))
 
     def _standardise(self, x: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        k = keys.size(0)
-        extras = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)
+        extras = self._extras(keys)
         x = self.encoder(torch.nan_to_num(x, 0.0, 0.0, 0.0).view(1, -1))
         return ((x - extras[:self.shape_dim]) / extras[self.shape_dim:2 * self.shape_dim]).view(1, -1)
 
@@ -257,15 +308,66 @@ class PathShapeKernelPolicy(nn.Module):
         q = self._standardise(x_t[self.motion_feature_dim:], keys)
         read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6])
         if self.commit_share > 0:
-            extras = keys[:, k + self.shape_dim + 6:self._block(k)].reshape(-1)
+            extras = self._extras(keys)
             read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]
                                      ).to(read_k.dtype)
         read_k = read_k.view(6)
+        h_next = torch.cat([h2, mean_i])
+        c_next = torch.cat([c2, torch.zeros(6)])
+        if self.match_share > 0:
+            if float(self._extras(keys)[self.match_extras_at + 2 * self.match_frame_dim]) > 0.0:
+                read_m, cost, length = self._match(x_t[self.motion_feature_dim:], h[hi + 6:], c[hi + 6:], keys)
+                read_k = (1.0 - self.match_share) * read_k + self.match_share * read_m
+            else:  # a context longer than the match's state holds: the kernel read alone
+                cost = torch.zeros(self.match_max_steps)
+                length = torch.zeros(self.match_max_steps)
+            h_next = torch.cat([h_next, cost])
+            c_next = torch.cat([c_next, length])
         a = self._blend(keys)
         mean = a * read_k + (1.0 - a) * mean_i
         read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
-        return (mean, std, torch.cat([h2, mean_i]), torch.cat([c2, torch.zeros(6)]), read, v,
-                torch.cat([query_i, q.view(-1)]))
+        return (mean, std, h_next, c_next, read, v, torch.cat([query_i, q.view(-1)]))
+
+    def _match(self, p: torch.Tensor, cost: torch.Tensor, length: torch.Tensor, keys: torch.Tensor
+               ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """One step of the time warp: (read (6), cost, length), cost and length padded to
+        match_max_steps. Each context step i keeps the least mean cost of matching the stream's recent
+        steps to its clip from the clip's first step up to i (length 0: no match yet), by steps of
+        (1, 1) (or a fresh start at a clip's first step), (1, 0) and (1, 2); each clip's best step gives
+        its labels there, weighted by exp(-(its mean cost - the best clip's) / tau)."""
+        k = keys.size(0)
+        extras = self._extras(keys)
+        at = self.match_extras_at
+        block = keys[:, self._extras_end(k):self._block(k)]
+        frames, labels = block[:, :self.match_frame_dim], block[:, self.match_frame_dim:self.match_frame_dim + 6]
+        position, clip = block[:, self.match_frame_dim + 6], block[:, self.match_frame_dim + 7].to(torch.int64)
+        f = self._match_frames(torch.nan_to_num(p, 0.0, 0.0, 0.0).view(1, -1))
+        f = (f - extras[at:at + self.match_frame_dim]) / extras[at + self.match_frame_dim:at + 2 * self.match_frame_dim]
+        weight = torch.ones(self.match_frame_dim)
+        weight[63:] = self.match_velocity_weight
+        d = ((frames - f) ** 2 * (weight / weight.sum())).sum(1)
+        length = length[:k]
+        cost = torch.where(length > 0, cost[:k], torch.full_like(d, self.match_none))
+        none1 = torch.full((1,), self.match_none)
+        zero1 = torch.zeros(1)
+        diag = torch.where(position > 0, torch.cat([none1, cost[:-1]]), torch.zeros_like(d))
+        diag_length = torch.where(position > 0, torch.cat([zero1, length[:-1]]), torch.zeros_like(d))
+        skip = torch.where(position > 1, torch.cat([none1, none1, cost[:-2]])[:k], torch.full_like(d, self.match_none))
+        skip_length = torch.cat([zero1, zero1, length[:-2]])[:k]
+        candidates = torch.stack([diag, cost, skip])
+        lengths = torch.stack([diag_length, length, skip_length])
+        pick = torch.argmin((candidates + d) / (lengths + 1.0), 0).view(1, -1)
+        cost = candidates.gather(0, pick).view(-1) + d
+        length = lengths.gather(0, pick).view(-1) + 1.0
+        mean_cost = cost / length
+        clips = int(clip.max()) + 1
+        best = torch.full((clips,), self.match_none).scatter_reduce(0, clip, mean_cost, reduce="amin", include_self=True)
+        winner = (mean_cost <= best[clip]).to(d.dtype)
+        ties = torch.zeros(clips).scatter_add(0, clip, winner)
+        w = winner * torch.exp(-(mean_cost - mean_cost.min()) / self.match_tau) / ties[clip]
+        read = (w.view(-1, 1) * labels).sum(0) / w.sum()
+        pad = torch.zeros(self.match_max_steps - k)
+        return read, torch.cat([cost, pad]), torch.cat([length, pad])
 
     @torch.jit.export
     def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
@@ -296,7 +398,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
                             encoder: Optional[os.PathLike] = None,
-                            commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH)
+                            commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH),
+                            match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU)
                             ) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
@@ -310,12 +413,13 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
-                                                          encoder_module, tuple(commit)).eval())
+                                                          encoder_module, tuple(commit), tuple(match)).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
+        **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
     if encoder_card is not None:
         card["path_shape_read"]["encoder"] = dict(encoder_card, file=pathlib.Path(encoder).name)
@@ -341,11 +445,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                    default=[DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH],
                    help="commit SHARE of the kernel read to its dominant command, full from HIGH of its size, "
                         "none below LOW (SHARE 0: off)")
+    p.add_argument("--match", type=float, nargs=3, metavar=("SHARE", "VELOCITY_WEIGHT", "TAU"),
+                   default=[DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU],
+                   help="SHARE of the kernel read replaced by the stroke matched against each context clip with a "
+                        "time warp (SHARE 0: off)")
     p.add_argument("--encoder", default=None,
                    help="a learning.hand_encoder file: the kernel reads the path and shape through it")
     args = p.parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
-                                  args.encoder, tuple(args.commit))
+                                  args.encoder, tuple(args.commit), tuple(args.match))
     print(f"wrote {out}")
     return 0
 
