@@ -32,11 +32,20 @@ are the CCHP's. The CCHP is fed its own mean, carried in the last 6 entries of h
 `y_prev`, the blended mean, is not used). No training: the read is fitted by one linear solve,
 from the person's own clips, when the context is encoded.
 
+With `--commit SHARE LOW HIGH` (the shipped file: 0.5 0.2 0.6) SHARE of r_k is replaced by its dominant
+command (`_committed`). With `--match SHARE W TAU` (the shipped file: 0.25 50 0.05) SHARE of that is
+replaced by the stroke matched against each context clip with a time warp (`_match`): the frames (the
+shape about the centre now, the centre's velocity over 0.4 s weighted W) of the stream's recent steps
+matched to each clip from its first step, the clips' labels at their best matches weighted by
+exp(-(mean cost - the best) / TAU). Its state rides in h and c after the CCHP's, with room for
+MATCH_MAX_STEPS context steps; A is chosen on the committed kernel read without it.
+
 With `--encoder` (a `learning.hand_encoder` file, learned across people), s_i and s(t) are the
 encoder's embedding of the path and shape instead of the features themselves; the rest is unchanged.
 
-Keys (K, D): [M (K) | s (PATH_SHAPE_DIM, or the embedding's width) | W (6) | mean, spread and b of the standardisation and A,
-row-major over ceil((2 width of s + 2) / K) columns | the CCHP's keys]. The settings were chosen
+Keys (K, D): [M (K) | s (PATH_SHAPE_DIM, or the embedding's width) | W (6) | mean, spread and b of the standardisation and A
+(then the command sizes and the match frames' mean, spread and fit, when on), row-major over ceil(extra_size / K)
+columns | with the match: each step's standardised frame (66), label (6), position in its clip and clip | the CCHP's keys]. The settings were chosen
 on recorded development people, the folds also on a development simulated population
 (docs/real_people.md, section 3).
 """
