@@ -253,6 +253,31 @@ def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsy
     assert "2 more runs summarised from earlier logs" in (out / "study.md").read_text()
 
 
+
+def test_the_study_runs_its_gesture_conditions_with_the_policy_file_given(tmp_path):
+    """--model: the gesture conditions' runs read that file (their logs say so and carry its stem);
+    the joystick's do not, so their logs are shared with a study of the scenario's file."""
+    import pathlib
+
+    from rtcohand_drake.run_log import read_run_log
+
+    model = pathlib.Path(__file__).resolve().parents[1] / "models" / "cchp_path_shape.pt"
+    out = tmp_path / "study"
+    status = study.main(["--populations", "101", "--users", "u10", "--conditions", "responsive", "joystick",
+                         "--cap", "1", "--workers", "0", "--bootstrap", "200", "--out", str(out),
+                         "--model", str(model)])
+    assert status == 0
+    logs = out / "logs"
+    assert sorted(p.name for p in logs.glob("*.h5")) == ["p101_u10_joystick_s0.h5",
+                                                         "p101_u10_responsive_mcchp_path_shape_s0.h5"]
+    assert pathlib.Path(read_run_log(str(logs / "p101_u10_responsive_mcchp_path_shape_s0.h5")).model).name == \
+        "cchp_path_shape.pt"
+    assert "cchp_path_shape.pt" not in read_run_log(str(logs / "p101_u10_joystick_s0.h5")).model
+    assert json.loads((out / "study.json").read_text())["model"] == str(model)
+    assert "read the policy file" in (out / "study.md").read_text()
+    with pytest.raises(SystemExit):
+        study.main(["--model", str(tmp_path / "none.pt"), "--out", str(out)])
+
 @needs_dask
 def test_address_joins_an_existing_cluster(tmp_path):
     # A cluster started elsewhere (here: in this test, as `dask scheduler` / `dask worker` would);

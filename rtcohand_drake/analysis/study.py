@@ -51,6 +51,7 @@ import numpy as np
 from rtcohand_drake.errors import run_cli
 
 CONDITIONS = ("responsive", "paper", "joystick", "intent")
+GESTURE_CONDITIONS = ("responsive", "paper")  # the conditions a policy file reads
 OUT_SAMPLE = ("u10", "u11", "u12", "u13", "u14")
 PAPER_RATIO = (1.89, 0.66)
 # The study's "moving" share and median speeds count a command as moving the part when the
@@ -62,25 +63,31 @@ MOVING_TURN_RAD_S = 0.02
 
 
 def run_condition(population: int, user: str, condition: str, out: str, seed: int = 0,
-                  cap_s: float | None = None) -> dict:
+                  cap_s: float | None = None, model: str | None = None) -> dict:
     """One run, its log written to `out`; returns its summary (`summarise`) with the log's path.
 
     `cap_s` replaces the scenario's cap (`duration_s`); the run still ends a short hold after
-    the sixth face. Raises on a run that exits with an error."""
-    log = Path(out) / log_name(population, user, condition, seed)
+    the sixth face. `model`, a policy file, replaces the scenario's in the gesture conditions
+    (the joystick and the intent reference read no gestures). Raises on a run that exits with an
+    error."""
+    log = Path(out) / log_name(population, user, condition, seed, model)
     log.parent.mkdir(parents=True, exist_ok=True)
     if condition == "intent":
         _run_intent(population, user, log, seed, cap_s)
     else:
-        _run_command(population, user, condition, log, seed, cap_s)
+        _run_command(population, user, condition, log, seed, cap_s, model)
     return {**summarise(str(log)), "log": str(log)}
 
 
-def log_name(population: int, user: str, condition: str, seed: int) -> str:
-    return f"p{population}_{user}_{condition}_s{seed}.h5"
+def log_name(population: int, user: str, condition: str, seed: int, model: str | None = None) -> str:
+    """The run log's file name; a gesture condition read by another policy file than the
+    scenario's carries the file's stem, so the runs of two files can share one logs folder."""
+    tag = f"_m{Path(model).stem}" if model and condition in GESTURE_CONDITIONS else ""
+    return f"p{population}_{user}_{condition}{tag}_s{seed}.h5"
 
 
-def _run_command(population: int, user: str, condition: str, log: Path, seed: int, cap_s: float | None) -> None:
+def _run_command(population: int, user: str, condition: str, log: Path, seed: int, cap_s: float | None,
+                 model: str | None = None) -> None:
     import tempfile
 
     import yaml
@@ -100,7 +107,7 @@ def _run_command(population: int, user: str, condition: str, log: Path, seed: in
         if condition == "joystick":
             args += ["--gesture-source", "joystick"]
         else:
-            args += ["--filter-mode", condition]
+            args += ["--filter-mode", condition] + (["--model", str(model)] if model else [])
         with contextlib.redirect_stdout(io.StringIO()):
             status = main(args)
     if status != 0:
@@ -250,6 +257,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the runs' --seed (the people's decision rhythm), each person runs each (default: 0)")
     p.add_argument("--seed", type=int, default=None, help="one run seed (the same as --run-seeds N)")
     p.add_argument("--cap", type=float, default=None, help="the runs' time cap (s; default: the scenario's)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="the policy file of the gesture conditions (default: the scenario's)")
     p.add_argument("--workers", "--jobs", type=int, default=2,
                    help="local cluster worker processes; 0 runs in this process")
     p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
@@ -266,6 +275,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.runs_per_worker < 0:
         p.error("--runs-per-worker must be 0 (never restart) or more")
+    if args.model is not None and not args.model.is_file():
+        p.error(f"--model {args.model}: no such file")
+    model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
     from rtcohand_drake.scenario import load_scenario
 
@@ -281,7 +293,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     done = {}
     if args.summarise_only or args.resume:
         for key in keys:
-            path = logs / log_name(*key)
+            path = logs / log_name(*key, model)
             if path.is_file():
                 try:
                     done[key] = Outcome(key, {**summarise(str(path)), "log": str(path)}, attempts=1)
@@ -299,7 +311,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         todo = [k for k in keys if k not in done]
         if done:
             print(f"resuming: {len(done)} runs already in {logs}, {len(todo)} to run", file=sys.stderr)
-        report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap)) for k in todo],
+        report = run_tasks(run_condition, [(k, (k[0], k[1], k[2], str(logs), k[3], args.cap, model)) for k in todo],
                            workers=args.workers, address=args.address, label="study", describe=describe,
                            runs_per_worker=args.runs_per_worker)
         ran = {o.key: o for o in report.outcomes}
@@ -309,9 +321,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     results, failed = collect(outcomes, args.conditions)
     compared = comparisons(results, args.conditions, cap, args.bootstrap)  # bootstrap once, for both files
     table = markdown(results, args.conditions, cap, compared, failed, engine_line)
+    if model:
+        table = f"The gesture conditions read the policy file `{args.model}`.\n\n" + table
     print(table)
     (args.out / "study.md").write_text(table)
     summary = {"populations": populations, "run_seeds": seeds, "cap_s": cap, "conditions": args.conditions,
+               "model": model,
                "results": {person: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
                            for person, by_c in results.items()},
                "failed": failed,
