@@ -308,3 +308,29 @@ def test_runs_per_worker_restarts_the_workers_between_batches():
     assert len({o.value for o in kept.outcomes}) <= 2
     with pytest.raises(ValueError, match="runs_per_worker"):
         run_tasks(os.getpid, tasks, workers=2, progress=False, runs_per_worker=-1)
+
+
+def test_two_studies_compare_person_by_person(load_script, tmp_path, capsys):
+    """benchmarks/compare_studies.py: the second study's condition against the first's, paired by person,
+    with a person who did not finish counted at the cap; studies of other people are refused."""
+    def run(t):
+        return {"completed": t is not None, "completion_s": t, "faces": 6 if t else 3}
+
+    people = {"p1/u10": (30.0, 40.0, 20.0), "p1/u11": (60.0, 50.0, 25.0), "p2/u10": (None, 90.0, 30.0)}
+    first = {"populations": [1, 2], "run_seeds": [0], "cap_s": 180.0, "model": None,
+             "results": {p: {"responsive": {"0": run(b)}, "joystick": {"0": run(j)}}
+                         for p, (_, b, j) in people.items()}}
+    second = dict(first, model="/x/cchp_path_shape.pt",
+                  results={p: {"responsive": {"0": run(a)}} for p, (a, _, _) in people.items()})
+    (tmp_path / "a.json").write_text(json.dumps(first))
+    (tmp_path / "b.json").write_text(json.dumps(second))
+    script = load_script("benchmarks/compare_studies.py")
+    assert script.main(["--first", str(tmp_path / "a.json"), "--second", str(tmp_path / "b.json"),
+                        "--bootstrap", "200"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| responsive, second")]
+    # ratios 30/40, 60/50, 180/90 (not done: the cap): median 1.2; against the joystick 1.5, 2.4, 6.0.
+    assert "responsive, first study (the scenario file) | 3 | 1.200 (" in rows[0]
+    assert "| 1/3 against 0/3 | 0 |" in rows[0]
+    assert "| joystick | 3 | 2.400 (" in rows[1]
+    (tmp_path / "c.json").write_text(json.dumps(dict(second, populations=[1])))
+    assert script.main(["--first", str(tmp_path / "a.json"), "--second", str(tmp_path / "c.json")]) == 2
