@@ -122,6 +122,11 @@ class PathShapeKernelPolicy(nn.Module):
         self.match_frame_dim = MATCH_FRAME_DIM
         self.match_columns = MATCH_COLUMNS
         self.match_none = MATCH_NONE
+        # Each frame value's weight in a step's match cost: 1 for the 63 shape values, the velocity weight
+        # for the centre's 3, normalised to sum to 1.
+        weight = torch.ones(MATCH_FRAME_DIM)
+        weight[63:] = self.match_velocity_weight
+        self.match_weight = weight / weight.sum()
         self.hidden_size = self.inner_hidden + 6 + self.match_max_steps
         self.latent_dim = int(inner.latent_dim)
         self.motion_dim = 6
@@ -278,17 +283,20 @@ class PathShapeKernelPolicy(nn.Module):
         return torch.clamp(num / den, 0.0, 1.0)
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
-        return self._extras(keys)[2 * self.shape_dim + 1]
+        return self._blend_of(self._extras(keys))
 
-    def _kernel(self, q: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        """k (1, K) of a standardised query (1, shape_dim)."""
+    def _blend_of(self, extras: torch.Tensor) -> torch.Tensor:
+        """A, from `_extras(keys)`."""
+        return extras[2 * self.shape_dim + 1]
+
+    def _kernel(self, q: torch.Tensor, keys: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
+        """k (1, K) of a standardised query (1, shape_dim); `extras` is `_extras(keys)`."""
         k = keys.size(0)
         s = keys[:, k:k + self.shape_dim]
-        width = self._extras(keys)[2 * self.shape_dim]
+        width = extras[2 * self.shape_dim]
         return torch.exp(-torch.cdist(q, s) ** 2 / (2.0 * width ** 2))
 
-    def _standardise(self, x: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        extras = self._extras(keys)
+    def _standardise(self, x: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
         x = self.encoder(torch.nan_to_num(x, 0.0, 0.0, 0.0).view(1, -1))
         return ((x - extras[:self.shape_dim]) / extras[self.shape_dim:2 * self.shape_dim]).view(1, -1)
 
@@ -299,7 +307,8 @@ class PathShapeKernelPolicy(nn.Module):
         inner = self.inner.attention_of(query[:self.inner_query_size], keys[:, self._block(k):])
         if inner.dim() == 2:
             inner = inner.mean(0)
-        kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys), keys[:, :k]).view(-1)
+        kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys, self._extras(keys)),
+                          keys[:, :k]).view(-1)
         a = self._blend(keys)
         return a * kernel + (1.0 - a) * inner
 
@@ -314,47 +323,45 @@ class PathShapeKernelPolicy(nn.Module):
         hi = self.inner_hidden
         mean_i, std, h2, c2, read_i, v, query_i = self.inner.step_read(
             x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], keys[:, self._block(k):], values, z)
-        q = self._standardise(x_t[self.motion_feature_dim:], keys)
-        read_k = torch.mm(self._kernel(q, keys), keys[:, k + self.shape_dim:k + self.shape_dim + 6])
+        extras = self._extras(keys)
+        q = self._standardise(x_t[self.motion_feature_dim:], extras)
+        read_k = torch.mm(self._kernel(q, keys, extras), keys[:, k + self.shape_dim:k + self.shape_dim + 6])
         if self.commit_share > 0:
-            extras = self._extras(keys)
             read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]
                                      ).to(read_k.dtype)
         read_k = read_k.view(6)
         h_next = torch.cat([h2, mean_i])
         c_next = torch.cat([c2, torch.zeros(6)])
         if self.match_share > 0:
-            if float(self._extras(keys)[self.match_extras_at + 2 * self.match_frame_dim]) > 0.0:
-                read_m, cost, length = self._match(x_t[self.motion_feature_dim:], h[hi + 6:], c[hi + 6:], keys)
+            if float(extras[self.match_extras_at + 2 * self.match_frame_dim]) > 0.0:
+                read_m, cost, length = self._match(x_t[self.motion_feature_dim:], h[hi + 6:], c[hi + 6:], keys, extras)
                 read_k = (1.0 - self.match_share) * read_k + self.match_share * read_m
             else:  # a context longer than the match's state holds: the kernel read alone
                 cost = torch.zeros(self.match_max_steps)
                 length = torch.zeros(self.match_max_steps)
             h_next = torch.cat([h_next, cost])
             c_next = torch.cat([c_next, length])
-        a = self._blend(keys)
+        a = self._blend_of(extras)
         mean = a * read_k + (1.0 - a) * mean_i
         read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
         return (mean, std, h_next, c_next, read, v, torch.cat([query_i, q.view(-1)]))
 
-    def _match(self, p: torch.Tensor, cost: torch.Tensor, length: torch.Tensor, keys: torch.Tensor
-               ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _match(self, p: torch.Tensor, cost: torch.Tensor, length: torch.Tensor, keys: torch.Tensor,
+               extras: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """One step of the time warp: (read (6), cost, length), cost and length padded to
         match_max_steps. Each context step i keeps the least mean cost of matching the stream's recent
         steps to its clip from the clip's first step up to i (length 0: no match yet), by steps of
         (1, 1) (or a fresh start at a clip's first step), (1, 0) and (1, 2); each clip's best step gives
-        its labels there, weighted by exp(-(its mean cost - the best clip's) / tau)."""
+        its labels there, weighted by exp(-(its mean cost - the best clip's) / tau). `extras` is
+        `_extras(keys)`."""
         k = keys.size(0)
-        extras = self._extras(keys)
         at = self.match_extras_at
         block = keys[:, self._extras_end(k):self._block(k)]
         frames, labels = block[:, :self.match_frame_dim], block[:, self.match_frame_dim:self.match_frame_dim + 6]
         position, clip = block[:, self.match_frame_dim + 6], block[:, self.match_frame_dim + 7].to(torch.int64)
         f = self._match_frames(torch.nan_to_num(p, 0.0, 0.0, 0.0).view(1, -1))
         f = (f - extras[at:at + self.match_frame_dim]) / extras[at + self.match_frame_dim:at + 2 * self.match_frame_dim]
-        weight = torch.ones(self.match_frame_dim)
-        weight[63:] = self.match_velocity_weight
-        d = ((frames - f) ** 2 * (weight / weight.sum())).sum(1)
+        d = ((frames - f) ** 2 * self.match_weight).sum(1)
         length = length[:k]
         cost = torch.where(length > 0, cost[:k], torch.full_like(d, self.match_none))
         none1 = torch.full((1,), self.match_none)
