@@ -104,6 +104,27 @@ def test_import_writes_each_persons_commands_in_the_user_frame(tree, natural):
     assert list(turn.active_dims) == [5] and turn.object_velocity[rest + 20, 5] == pytest.approx(shrec.ROTATION_RAD_S)
 
 
+def test_whole_hand_map_makes_every_command_with_the_whole_hand(tree, tmp_path):
+    out = tmp_path / "whole.h5"
+    shrec.import_shrec17(tree, out, "whole-hand", progress=False)
+    # The map as the issue of record states it: swipes right/left/up/down, expand/grab, rotation CCW/CW,
+    # tap/pinch, swipe V/+ (G = 7, 8, 9, 10, 3, 1, 6, 5, 2, 4, 13, 12), all with the whole hand (F = 2).
+    expected = {"Tx+": 7, "Tx-": 8, "Tz+": 9, "Tz-": 10, "Ty+": 3, "Ty-": 1, "Rz+": 6, "Rz-": 5,
+                "Rx+": 2, "Rx-": 4, "Ry+": 13, "Ry-": 12}
+    with h5py.File(out) as f:
+        cmap = json.loads(f["users/s03"].attrs["command_map"])
+        meta = json.loads(f.attrs["import"])
+    assert meta["mapping"] == "whole-hand"
+    assert cmap == {c: f"G{g}F2" for c, g in expected.items()}
+    own = [c for c in read_dataset(out) if c.user == "s03"]
+    swipe_v = next(c for c in own if c.clip_id == "g13f2e01")
+    assert list(swipe_v.active_dims) == [4] and swipe_v.object_velocity[15 + 20, 4] == pytest.approx(shrec.ROTATION_RAD_S)
+    assert not any(c.clip_id[3:5] == "f1" for c in own)  # nothing made with one finger
+    run = _run("rtcohand_drake.data.import_shrec17", "--root", str(tree), "--out", str(tmp_path / "x.h5"),
+               "--mapping", "whole-hand", "--subjects", "3")
+    assert run.returncode == 0 and "whole-hand map" in run.stdout
+
+
 def test_axis_map_is_a_proper_rotation():
     assert np.linalg.det(shrec.R_UC) == pytest.approx(1.0)
     # A hand moving toward the camera (depth falling) moves forward in U, away from the person.

@@ -1,7 +1,7 @@
 """Import recorded people: the SHREC'17 hand-gesture skeletons into the gesture dataset file.
 
     python -m rtcohand_drake.data.import_shrec17 --root DIR --out FILE.h5
-        [--mapping natural|custom] [--subjects S ...] [--seed N] [--group out-sample|in-sample]
+        [--mapping natural|whole-hand|custom] [--subjects S ...] [--seed N] [--group out-sample|in-sample]
         [--rest-s 0.5] [--ramp-s 0.2]
 
 DIR is the dataset as it ships (De Smedt et al., "SHREC'17 Track: 3D Hand
@@ -16,7 +16,10 @@ What a recorded person becomes (docs/interfaces.md, recorded people):
 - **Who commands what.** Each person gets a command map: which variant
   commands which of the 12 one-motion commands Tx+, Tx-, Ty+, ... Rz-
   (`COMMANDS`). ``natural`` is one fixed map for everyone (`NATURAL_MAP`:
-  swipes move, rotations turn, the rest by the whole hand); ``custom`` draws
+  swipes move, rotations turn, the rest by the whole hand; the whole hand's
+  and one finger's rotations both turn, so one motion comes in two
+  postures); ``whole-hand`` is one fixed map with all 12 gestures made with
+  the whole hand (`WHOLE_HAND_MAP`); ``custom`` draws
   12 of the person's variants at random for each person (seeded by ``--seed``
   and the subject), as a person who chooses their own gestures would.
 - **Keypoints in U.** Joint 1 (the palm centre) is dropped, which leaves the
@@ -82,7 +85,16 @@ NATURAL_MAP = {
     "Tx+": (7, 2), "Tx-": (8, 2), "Ty+": (2, 2), "Ty-": (1, 2), "Tz+": (9, 2), "Tz-": (10, 2),
     "Rx+": (3, 2), "Rx-": (4, 2), "Ry+": (5, 2), "Ry-": (6, 2), "Rz+": (6, 1), "Rz-": (5, 1),
 }
-MAPPINGS = ("natural", "custom")
+# whole-hand: all 12 gestures made with the whole hand, each motion by one gesture: swipes right/left
+# and up/down move across and up/down, an expand pushes and a grab pulls, the rotations turn about
+# the vertical axis, a tap and a pinch tilt about the across axis, a swipe V and a swipe + about the
+# forward one.
+WHOLE_HAND_MAP = {
+    "Tx+": (7, 2), "Tx-": (8, 2), "Ty+": (3, 2), "Ty-": (1, 2), "Tz+": (9, 2), "Tz-": (10, 2),
+    "Rx+": (2, 2), "Rx-": (4, 2), "Ry+": (13, 2), "Ry-": (12, 2), "Rz+": (6, 2), "Rz-": (5, 2),
+}
+FIXED_MAPS = {"natural": NATURAL_MAP, "whole-hand": WHOLE_HAND_MAP}
+MAPPINGS = ("natural", "whole-hand", "custom")
 
 _PATH = re.compile(r"gesture_(\d+)/finger_(\d+)/subject_(\d+)/essai_(\d+)/skeletons_world\.txt$")
 
@@ -179,8 +191,8 @@ def with_rest(keypoints: np.ndarray, n_rest: int) -> np.ndarray:
 def command_map(mapping: str, variants: Sequence[tuple[int, int]], subject: int, seed: int
                 ) -> dict[str, tuple[int, int]]:
     """Command name -> variant for one person (module docstring); only variants the person recorded."""
-    if mapping == "natural":
-        return {c: v for c, v in NATURAL_MAP.items() if v in set(variants)}
+    if mapping in FIXED_MAPS:
+        return {c: v for c, v in FIXED_MAPS[mapping].items() if v in set(variants)}
     if mapping != "custom":
         raise InputError(f"unknown mapping {mapping!r} (expected one of {', '.join(MAPPINGS)})")
     pool = sorted(set(variants))
@@ -253,7 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 description=__doc__.splitlines()[0])
     p.add_argument("--root", required=True, type=Path, help="the dataset's folder (holds gesture_1 .. gesture_14)")
     p.add_argument("--out", required=True, type=Path, help="the gesture dataset file to write (.h5)")
-    p.add_argument("--mapping", choices=MAPPINGS, default="natural", help="who commands what (default natural)")
+    p.add_argument("--mapping", choices=MAPPINGS, default="natural", help="who commands what: natural (one fixed map, one motion in two postures), whole-hand (one fixed "
+                        "map, every gesture with the whole hand) or custom (12 variants drawn per person); default natural")
     p.add_argument("--subjects", type=int, nargs="+", default=None, help="subject numbers (default: all found)")
     p.add_argument("--seed", type=int, default=0, help="seed of the custom maps")
     p.add_argument("--group", choices=("out-sample", "in-sample"), default="out-sample",
