@@ -61,7 +61,8 @@ def _gestures():
     scenario = load_scenario("inspection")
     source, pieces = make_builtin_person(scenario, seed=0)
     policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz,
-                        correction_weight=scenario.policy.correction_weight)
+                        correction_weight=scenario.policy.correction_weight,
+                        rest_release=scenario.policy.rest_release)
     return build_run_diagram(scenario, source=source, policy=policy).diagram
 
 

@@ -147,7 +147,8 @@ def _build(args, scenario, meshcat, station=None):
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
               f"read wrongly; record them: python -m rtcohand_drake.record --only {','.join(missing)}",
               file=sys.stderr)
-    policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
+    policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight,
+                        rest_release=scenario.policy.rest_release)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time
 

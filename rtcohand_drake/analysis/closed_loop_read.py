@@ -125,7 +125,8 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
     rate = scenario.policy.rate_hz
     if policy is None:
         policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, rate, seed=seed,
-                            correction_weight=scenario.policy.correction_weight)
+                            correction_weight=scenario.policy.correction_weight,
+                        rest_release=scenario.policy.rest_release)
     gesture_source = "intent" if policy.HasInputPort(INTENDED_TWIST) else None
     run = build_run_diagram(scenario, source=source, policy=policy, gesture_source=gesture_source)
     simulator = Simulator(run.diagram)

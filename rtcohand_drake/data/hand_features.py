@@ -301,6 +301,23 @@ def resample(
     return out.reshape((new_times.size,) + vals.shape[1:]).astype(dtype), new_times
 
 
+def join_recordings(recordings) -> list[np.ndarray]:
+    """Recordings (each (N, 21, 3), NaN where the hand is lost) moved so that each starts where the
+    one before ended: its first seen centre (the mean of the 21 keypoints) on the last seen centre
+    of those before. Recordings played one after another then join without a jump of the hand, as a
+    person's hand goes on from where it is; a recording never seen is left where it is."""
+    joined, end = [], None
+    for r in recordings:
+        r = np.asarray(r, np.float64).reshape(len(r), NUM_KEYPOINTS, 3)
+        seen = np.flatnonzero(np.isfinite(r).all(axis=(1, 2)))
+        if seen.size and end is not None:
+            r = r + (end - r[seen[0]].mean(axis=0))
+        if seen.size:
+            end = r[seen[-1]].mean(axis=0)
+        joined.append(r)
+    return joined
+
+
 class HandFeatureStream:
     """Frame-by-frame features for a live source: call :meth:`update` at the policy rate.
 

@@ -23,6 +23,15 @@ paper's CCHP), w = 0 the read alone (`policy.correction_weight` in the
 scenario; docs/policy.md has what each does in the closed-loop task). The module
 is always fed its own mean, as in training, whatever w is.
 
+A step whose features jump far beyond the person's own motion (the hand re-found elsewhere, a
+replay moving on to its next clip) reads as no motion and starts the path-and-shape path afresh,
+as does a hand seen again after a loss of two periods or more (the jump guard,
+`learning.rest_release`). The rest release (`policy.rest_release` in the scenario) then scales that
+output by a gate fitted to the person's own clips when the box is built: once the hand has been
+still for a few periods, the command lets go of the gesture the policy just saw, whatever its
+memory still holds; the period the hand moves again, the gate is open. It only ever scales the
+command down, and the module is still fed its own mean.
+
 Input ports
   gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)
   resume_count     (1)  optional; z is resampled when it changes
@@ -53,6 +62,7 @@ from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM, PathShapeStream
 from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.learning.rest_release import LOST_STEPS, fit_rest_release
 from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, KEYPOINTS, KEYPOINTS_DIM, POLICY_MEAN,
                                        POLICY_STD, READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
 
@@ -69,6 +79,9 @@ class Policy:
     # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
     # (rtcohand_drake.systems.policy).
     correction_weight: float = 1.0
+    # Let go of the command once the hand rests (the rest release, rtcohand_drake.learning.rest_release);
+    # false: the output is the policy's own.
+    rest_release: bool = True
 
 
 def blended_output(mean, read, correction_weight: float) -> np.ndarray:
@@ -83,8 +96,9 @@ def blended_output(mean, read, correction_weight: float) -> np.ndarray:
 
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
-                 correction_weight: float = 1.0):
-        """`model_path`: an exported policy file, or a module already loaded by `load_policy`."""
+                 correction_weight: float = 1.0, rest_release: bool = True):
+        """`model_path`: an exported policy file, or a module already loaded by `load_policy`;
+        `rest_release`: gate the output by the person's rest release (module docstring)."""
         super().__init__()
         if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
             raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
@@ -109,6 +123,8 @@ class CchpPolicy(LeafSystem):
                                  " (a policy that reads the hand's path and shape needs context clips loaded "
                                  "with it: to_policy_clip(path_shape=True))" if self.feature_dim > FEATURE_DIM else ""))
         x_c, y_c, mask = pack_context(context_pieces)
+        self.release = fit_rest_release(context_pieces)  # the jump guard is always on; the gate as asked
+        self.release.on = self.release.on and bool(rest_release)
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
@@ -145,6 +161,8 @@ class CchpPolicy(LeafSystem):
             self._keypoints = self.DeclareVectorInputPort(KEYPOINTS, KEYPOINTS_DIM)
             self._stream = PathShapeStream(rate_hz)
             self._shape = self.DeclareDiscreteState(self._stream.state)
+        self._still = self.DeclareDiscreteState(np.zeros(1))  # the rest release's still count
+        self._lost = self.DeclareDiscreteState(np.zeros(1))  # periods the hand has been lost (the path's restart)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(POLICY_MEAN, self._out)
         self.DeclareStateOutputPort(POLICY_STD, self._std)
@@ -203,15 +221,24 @@ class CchpPolicy(LeafSystem):
                 discrete_state.set_value(self._z, z)
         x = np.asarray(self._x.Eval(context), float)
         x = np.where(np.isfinite(x), x, 0.0)  # a lost or corrupt frame reads as "no motion"
+        jumped = self.release.is_jump(x)
+        if jumped:  # the tracked hand jumped (learning.rest_release): no motion, and a fresh path
+            x = np.zeros_like(x)
         if self._shape is not None:  # the hand's path and shape: a lost hand holds its last skeleton
             self._stream.state = np.array(get(self._shape))
-            if resumes_changed:
+            keypoints = self._keypoints.Eval(context)
+            seen = bool(np.isfinite(keypoints).all())
+            lost = float(get(self._lost)[0])
+            if resumes_changed or jumped or (seen and lost >= LOST_STEPS):  # a fresh path (module docstring)
                 self._stream.reset()
-            shape, _ = self._stream.update(self._keypoints.Eval(context))
+            discrete_state.set_value(self._lost, [0.0 if seen else lost + 1.0])
+            shape, _ = self._stream.update(keypoints)
             discrete_state.set_value(self._shape, self._stream.state)
             x = np.concatenate([x, shape])
+        still = 0.0 if resumes_changed else self.release.next_count(float(get(self._still)[0]), x[:FEATURE_DIM])
+        discrete_state.set_value(self._still, [still])
         mean, std, h, c, read, v, query = self.step(x, y_prev, h, c, z)
-        out = blended_output(mean, read, self.correction_weight)
+        out = blended_output(mean, read, self.correction_weight) * self.release.gate(still)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion

@@ -9,6 +9,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from rtcohand_drake.data.hand_features import join_recordings
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS,
                                        KEYPOINTS_DIM)
@@ -19,7 +20,10 @@ class ReplayGestureSource(LeafSystem):
     """Replays clips at the policy rate (features computed offline, exactly as in training).
 
     `clips` are `PolicyClip`s; `skeletons` (optional) are per-clip keypoint
-    arrays resampled at the policy rate, for drawing. After the last clip the
+    arrays resampled at the policy rate, for drawing and for a policy that reads the hand's path
+    and shape; each clip's skeleton is moved to start where the one before ended
+    (`hand_features.join_recordings`), so the hand does not jump from one clip to the next (the
+    features, velocities, are each clip's own). After the last clip the
     source reports an invalid gesture (the supervisor's watchdog then stops the arm).
     """
 
@@ -34,8 +38,8 @@ class ReplayGestureSource(LeafSystem):
                         else None)
         self.clip_starts = np.cumsum([0] + [len(c) for c in clips])[:-1] / rate_hz
         self.clip_names = [c.name for c in clips]
-        self._skeletons = (np.concatenate([np.asarray(s, float).reshape(len(s), 63) for s in skeletons])
-                           if skeletons is not None else None)
+        self._skeletons = (np.concatenate([s.reshape(len(s), 63) for s in join_recordings(
+            [np.asarray(s, float).reshape(len(s), 21, 3) for s in skeletons])]) if skeletons is not None else None)
         self.DeclareVectorOutputPort(GESTURE_FEATURES, FEATURE_DIM, self._calc_features)
         self.DeclareVectorOutputPort(GESTURE_STATUS, GESTURE_STATUS_DIM, self._calc_status)
         self.DeclareVectorOutputPort(KEYPOINTS, KEYPOINTS_DIM, self._calc_keypoints)

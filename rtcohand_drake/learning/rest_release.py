@@ -1,0 +1,161 @@
+"""The rest release and the jump guard: the hand's rest and its jumps read as no motion.
+
+A policy's memory outlasts the gesture: the recurrent state, and in a file that reads the hand's
+path and shape, 1.6 s of path. When a person stops gesturing and rests their hand, the read can
+go on commanding the last gesture for a second or more (docs/policy.md, the rest release). The
+rest release scales the policy's output by a gate g in [0, 1] that falls to zero once the hand
+has been still for a few policy steps, and returns to 1 the step the hand moves again:
+
+    motion m(t) = sqrt(mean_j (x_j(t) / s_j)^2)       x the 36 hand-part velocities; s_j LINEAR_M_S
+                                                       for a linear one, ANGULAR_RAD_S for an angular
+                                                       one (fixed: a part's velocity that is only
+                                                       tracking jitter must not count as motion)
+    still(t)    = m(t) < theta;  n(t) = n(t-1) + 1 if still(t) else 0
+    g(t)        = 1 for n <= STILL_FROM, 0 for n >= STILL_TO, linear between
+
+Fitted to each person from their own labelled clips (`fit_rest_release`):
+- theta = max(REST_RATIO x the REST_QUANTILE of m over the context's rest steps (no label of
+  QUIET of the person's size within REST_MARGIN steps), MOTION_FLOOR x the median m over its commanding steps): above the person's
+  own tracking jitter at rest, and well below how they move when they gesture;
+- it is on only if, run over the person's own clips, it would take at most HARM of their labels'
+  squared size away: a person who commands with a still hand (a held posture, or labels that
+  outlast the motion) keeps the policy's output as it is.
+
+The gate only ever scales the command down; it reads the 36 features the policy reads, so a lost
+hand (zeros) counts as still. Everything it remembers is the still count n.
+
+The jump guard: a step whose motion m(t) is over JUMP_RATIO x the largest m of the person's own
+context steps, with the palm faster than JUMP_SPEED_M_S, is a jump of the tracked hand, not a gesture (the hand re-found elsewhere, another
+hand taken for it, a replay moving on to its next recording): its 36 features read as no motion
+and a path-and-shape read starts its path afresh there. So does a hand seen again after being
+lost for LOST_STEPS policy steps or more: it may be anywhere by then (`guard_stream` offline; the
+policy box step by step).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+FEATURES = 36  # the paper's hand-part velocities: the gate reads these, whatever else a file reads
+# The motion's scales: a part moving at 0.1 m/s counts as much as one turning at 1 rad/s (the
+# simulated handler's nominal speed and turn rate are 0.12 m/s and 0.6 rad/s).
+LINEAR_M_S, ANGULAR_RAD_S = 0.1, 1.0
+SCALES = np.where((np.arange(FEATURES) % 6) < 3, LINEAR_M_S, ANGULAR_RAD_S)
+# Chosen on development people: recorded (SHREC'17 training subjects 2, 4, 8, 10, 12, 14) and a
+# simulated development population (generator seed 0) (docs/policy.md, the rest release).
+STILL_FROM, STILL_TO = 1, 3  # policy steps still: the gate starts to fall after 1, is 0 after 3 (0.3 s at 10 Hz)
+REST_QUANTILE, REST_RATIO = 0.95, 1.5
+MOTION_FLOOR = 0.1
+REST_MARGIN = 2  # policy steps from any label for a step to count as rest
+QUIET = 0.05  # a label under this share of the person's size on every axis is no label (tracking noise)
+COMMANDING = 0.2  # a label commands when it is at least this share of the person's size on that axis
+HARM = 0.05  # the share of the labels' squared size the gate may take away on the person's own clips
+# A jump: over this many times the largest motion of the person's context steps (development people:
+# recorded context steps reach m = 3-7, the jumps between simulated recordings 11-24, their motion
+# 3-5), with the palm faster than this (recorded development people: 99.9 % of their policy steps
+# move the hand's centre less than 0.155 m, 1.55 m/s).
+JUMP_RATIO = 3.0
+JUMP_SPEED_M_S = 1.5
+LOST_STEPS = 2  # a hand lost this many policy steps starts a fresh path when it is seen again
+
+
+@dataclass
+class RestRelease:
+    """A person's rest release (module docstring). `on` False: the gate is always 1."""
+
+    theta: float = 0.0
+    on: bool = False
+    still_from: int = STILL_FROM
+    still_to: int = STILL_TO
+    harm: float = 0.0  # the share of the labels' squared size it takes away on the person's clips
+    jump: float = float("inf")  # m over this is a jump (module docstring)
+
+    def motion(self, x: np.ndarray) -> float:
+        x = np.nan_to_num(np.asarray(x, np.float64).reshape(-1)[:FEATURES])
+        return float(np.sqrt(np.mean((x / SCALES) ** 2)))
+
+    def is_jump(self, x: np.ndarray) -> bool:
+        x = np.nan_to_num(np.asarray(x, np.float64).reshape(-1)[:FEATURES])
+        return float(np.sqrt(x[0] ** 2 + x[1] ** 2 + x[2] ** 2)) > JUMP_SPEED_M_S and self.motion(x) > self.jump
+
+    def next_count(self, count: float, x: np.ndarray) -> float:
+        """The still count n(t) from n(t-1) and x(t)."""
+        return count + 1.0 if self.motion(x) < self.theta else 0.0
+
+    def gate(self, count: float) -> float:
+        """g for a still count n (1 when off)."""
+        if not self.on:
+            return 1.0
+        return float(np.clip((self.still_to - count) / (self.still_to - self.still_from), 0.0, 1.0))
+
+    def gates(self, features: np.ndarray) -> np.ndarray:
+        """(T,) g over a stream of features (T, >= 36), from a still count of 0."""
+        out, n = np.ones(len(features)), 0.0
+        for t, x in enumerate(features):
+            n = self.next_count(n, x)
+            out[t] = self.gate(n)
+        return out
+
+
+def _near_label(commanding: np.ndarray, margin: int) -> np.ndarray:
+    """(T,) bool: a commanding step within `margin` steps."""
+    near = commanding.copy()
+    for s in range(1, margin + 1):
+        near[s:] |= commanding[:-s]
+        near[:-s] |= commanding[s:]
+    return near
+
+
+def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]]) -> RestRelease:
+    """A person's rest release from their labelled context pieces [(features (T, >= 36), labels (T, 6))]."""
+    pieces = [(np.nan_to_num(np.asarray(f, np.float64)[:, :FEATURES]), np.nan_to_num(np.asarray(y, np.float64)))
+              for f, y in pieces if y is not None and len(f) > 0]
+    if not pieces:
+        return RestRelease()
+    x = np.concatenate([f for f, _ in pieces])
+    y = np.concatenate([l for _, l in pieces])
+    sizes = np.abs(y).max(0)
+    release = RestRelease(jump=float(JUMP_RATIO * np.sqrt(np.mean((x / SCALES) ** 2, axis=1)).max()))
+    scaled = np.where(sizes > 0, np.abs(y) / np.where(sizes > 0, sizes, 1.0), 0.0)
+    rest, moving = [], []
+    for f, l in pieces:
+        m = np.sqrt(np.mean((f / SCALES) ** 2, axis=1))
+        on = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= COMMANDING
+        labelled = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= QUIET
+        rest.append(m[~_near_label(labelled, REST_MARGIN)])
+        moving.append(m[on])
+    rest, moving = np.concatenate(rest), np.concatenate(moving)
+    if rest.size == 0 or moving.size == 0 or not scaled.any():
+        return release
+    release.theta = float(max(REST_RATIO * np.quantile(rest, REST_QUANTILE), MOTION_FLOOR * np.median(moving)))
+    release.on = True
+    taken = sum(float((((1.0 - release.gates(f)) ** 2)[:, None] * l ** 2).sum()) for f, l in pieces)
+    release.harm = taken / max(float((y ** 2).sum()), 1e-12)
+    release.on = release.harm <= HARM
+    return release
+
+
+def guard_stream(release: RestRelease, features: np.ndarray, keypoints: np.ndarray | None = None,
+                 rate_hz: float = 10.0) -> np.ndarray:
+    """Features (T, 36) of a stream with its jumps read as no motion, as the policy box reads them;
+    with `keypoints` (T, 21, 3) at the policy times (NaN when lost), the hand's path and shape
+    appended, its path started afresh at each jump."""
+    from rtcohand_drake.data.hand_features import PathShapeStream
+
+    x = np.array(features[:, :FEATURES], np.float64)
+    stream = PathShapeStream(rate_hz) if keypoints is not None else None
+    shapes, lost = [], 0
+    for t in range(len(x)):
+        jumped = release.is_jump(x[t])
+        if jumped:
+            x[t] = 0.0
+        if stream is not None:
+            seen = bool(np.isfinite(keypoints[t]).all())
+            if jumped or (seen and lost >= LOST_STEPS):
+                stream.reset()
+            lost = 0 if seen else lost + 1
+            shapes.append(stream.update(keypoints[t])[0])
+    return np.hstack([x, np.array(shapes)]) if stream is not None else x
