@@ -101,3 +101,20 @@ def test_malformed_yaml(tmp_path):
 ])
 def test_bad_flags(args, fragment):
     _assert_one_line(_run(*args), fragment)
+
+
+def test_no_meshcat_and_no_wait_are_not_exclusive():
+    """Both flags are accepted together, and no usage line (argparse's, the module's, the docs')
+    shows them as alternatives."""
+    import re
+    from pathlib import Path
+
+    import rtcohand_drake.run as run
+
+    args = run.make_parser().parse_args(["--no-meshcat", "--no-wait"])
+    assert args.no_meshcat and args.no_wait
+    exclusive = re.compile(r"--no-meshcat\s*\|\s*--no-wait|--no-wait\s*\|\s*--no-meshcat")
+    repo = Path(__file__).resolve().parents[1]
+    usages = {"argparse": run.make_parser().format_usage(), "run.py": run.__doc__,
+              **{p.name: p.read_text() for p in [repo / "README.md", *(repo / "docs").glob("*.md")]}}
+    assert not [name for name, text in usages.items() if exclusive.search(text)]

@@ -247,7 +247,7 @@ def _int_list(text: str) -> list[int]:
     return [int(text)]
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.study", description=__doc__.splitlines()[0])
     p.add_argument("--populations", type=_int_list, nargs="+", default=[[100], [101], [102]],
                    help="population seeds, or ranges such as 100-119 (five out-sample people each)")
@@ -272,6 +272,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="run nothing: summarise the run logs already in the logs folder")
     p.add_argument("--resume", action="store_true",
                    help="summarise the runs whose logs are already in the logs folder, run only the others")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = make_parser()
     args = p.parse_args(argv)
     if args.runs_per_worker < 0:
         p.error("--runs-per-worker must be 0 (never restart) or more")
