@@ -284,6 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error(f"--model {args.model}: no such file")
     model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
+    from rtcohand_drake.repo_paths import repo_relative
     from rtcohand_drake.scenario import load_scenario
 
     populations = [n for group in args.populations for n in group]
@@ -330,9 +331,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         table = f"The gesture conditions read the policy file `{args.model}`.\n\n" + table
     print(table)
     (args.out / "study.md").write_text(table)
+    def relative_log(run):  # the file is committed: its paths are the repository's (repo_paths)
+        return {**run, "log": repo_relative(run["log"])} if run and "log" in run else run
+
     summary = {"populations": populations, "run_seeds": seeds, "cap_s": cap, "conditions": args.conditions,
-               "model": model,
-               "results": {person: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
+               "model": repo_relative(model) if model else None,
+               "results": {person: {c: {str(s): relative_log(r) for s, r in runs.items()} for c, runs in by_c.items()}
                            for person, by_c in results.items()},
                "failed": failed,
                "comparisons": [dc.asdict(c) for c in compared]}
