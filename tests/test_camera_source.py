@@ -259,6 +259,22 @@ print("the program's own line", file=sys.stderr)
 """  # and exits without closing it
 
 
+def test_library_lines_are_told_from_the_programs_own():
+    from rtcohand_drake.vision.library_log import library_line
+
+    theirs = [b"INFO: [environment.cc:36] Creating LiteRT environment with options\n",
+              b"WARNING: Read-only tensor #3 (model_1/model/up_sampling2d_1/mul) has an unaligned buffer\n",
+              b"INFO: Created TensorFlow Lite XNNPACK delegate for CPU.\n",
+              b"WARNING: Logging before InitGoogle() is written to STDERR\n",
+              b"W0000 00:00:1796554543.892350    3745 inference_runner_litert.cc:1433] Input tensor memory\n",
+              b"I0000 00:00:1796554543.908870    3745 landmark_projection_calculator.cc:81] Using NORM_RECT\n"]
+    ours = [b"warning: no --camera-calibration given: using the defaults\n", b"INFO:drake:Meshcat listening\n",
+            b"rtcohand_drake.run: error: x.avi: no such video file\n", b"Traceback (most recent call last):\n",
+            b"E0000 00:00:1796554543.9    3745 calculator_graph.cc:12] a MediaPipe error stays\n",
+            b"\rreading u10's clips:  25%|###\n"]
+    assert all(library_line(line) for line in theirs) and not any(library_line(line) for line in ours)
+
+
 def test_landmarker_log_lines_only_with_verbose_and_closed_at_exit():
     status, err = _stderr_of("-c", LANDMARKER_LEFT_OPEN, "quiet", timeout=120)
     assert status == 0 and err.splitlines() == ["the program's own line"], err

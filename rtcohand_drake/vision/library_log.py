@@ -7,14 +7,14 @@ can be turned off from Python (no environment variable reaches them). Some
 come late, from MediaPipe's own threads: the warning about the alignment of
 an input tensor's memory, say, on whichever frame first has such a tensor.
 
-So while a holder holds the filter (`hold()` ... `release()`: a
+So while the filter is held (`hold()` ... `release()`: by each
 `HandLandmarker` while it is open, unless `verbose=True`, the commands'
-`--verbose`), descriptor 2 is a pipe, and a
-thread passes on everything written to it except the libraries' INFO and
-WARNING lines (`LIBRARY_LINE`). Errors (`E...`, `F...` lines) and every line
-of the program's own (which are lower-case `warning:` lines, tracebacks,
-progress bars) pass through unchanged, in order. When the last holder lets
-go, descriptor 2 is the terminal (or file) again.
+`--verbose`), descriptor 2 is a pipe, and a thread passes on everything
+written to it except the libraries' INFO and WARNING lines
+(`LIBRARY_LINE`). Errors (`E...`, `F...` lines) and every line of the
+program's own (lower-case `warning:` lines, Python's `WARNING:name:` log
+lines, tracebacks, progress bars) pass through unchanged, in order. When the
+last holder lets go, descriptor 2 is the terminal (or file) again.
 """
 
 from __future__ import annotations
@@ -48,8 +48,11 @@ class _Filter:
         self._thread.start()
 
     def _write(self, data: bytes) -> None:
-        while data:
-            data = data[os.write(self._terminal, data):]
+        try:
+            while data:
+                data = data[os.write(self._terminal, data):]
+        except OSError:  # stderr closed (a reader gone): the pipe is still drained, so no writer blocks
+            pass
 
     def _pump(self) -> None:
         pending = b""  # the start of a line that may yet turn out to be a library's
