@@ -154,8 +154,9 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
 
     rate = scenario.policy.rate_hz
     path_shape = int(model.feature_dim) > FEATURE_DIM  # a policy file that reads the hand's path and shape
+    user = None
     if args.context_file is not None:
-        pieces, _ = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
+        pieces, user = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
     elif setup.default_context is not None:
         pieces = setup.default_context(path_shape=path_shape)
     else:
@@ -163,9 +164,12 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
                          "(the user's own labelled clips)")
     missing = missing_motions(pieces)
     if missing:
+        record = f"python -m rtcohand_drake.record --only {','.join(missing)}"
+        if user is not None:  # into a file of their own, given after the others
+            record = (f"python -m rtcohand_drake.record --out MORE.h5 --user {user} --only {','.join(missing)}, "
+                      "then add MORE.h5 to --context-file")
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
-              f"read wrongly; record them: python -m rtcohand_drake.record --only {','.join(missing)}",
-              file=sys.stderr)
+              f"read wrongly; record them: {record}", file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time

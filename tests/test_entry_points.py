@@ -118,3 +118,21 @@ def test_no_meshcat_and_no_wait_are_not_exclusive():
     usages = {"argparse": run.make_parser().format_usage(), "run.py": run.__doc__,
               **{p.name: p.read_text() for p in [repo / "README.md", *(repo / "docs").glob("*.md")]}}
     assert not [name for name, text in usages.items() if exclusive.search(text)]
+
+
+def test_missing_motions_warning_says_how_to_add_them_and_a_second_file_does(tmp_path, capsys):
+    """A context lacking motions names them and the command that records them into a further file;
+    that file given after the first (`--context-file A.h5 B.h5`) completes the context."""
+    from rtcohand_drake.run import main
+
+    clips = [c for c in generate_population(GeneratorConfig(), n_users=1, seed=1)]
+    first, more = tmp_path / "first.h5", tmp_path / "more.h5"
+    write_dataset(first, [c for c in clips if list(c.active_dims) == [0]])
+    write_dataset(more, [c for c in clips if list(c.active_dims) != [0]])
+    common = ["--no-meshcat", "--duration", "0.2", "--realtime-rate", "0"]
+    assert main([*common, "--context-file", str(first)]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "holds no example" in line]
+    assert len(warning) == 1 and "Tx+" not in warning[0].split("record them")[0]
+    assert f"--user {clips[0].user} --only Ty+," in warning[0] and "add MORE.h5 to --context-file" in warning[0]
+    assert main([*common, "--context-file", str(first), str(more)]) == 0
+    assert "holds no example" not in capsys.readouterr().err
