@@ -448,7 +448,7 @@ def again_hint(args, motions: Sequence[str], model: Sequence[str] = ()) -> str:
     return (f"to record {', '.join(motions)} again: python -m rtcohand_drake.record --out {again} "
             f"--user {args.user} --style {args.style} --only {','.join(motions)}\n"
             f"then read both files' clips as one context: python -m rtcohand_drake.context_reading {both}"
-            + "".join(f" {m}" for m in model) + f" (and the same {both} for python -m rtcohand_drake.run)")
+            + "".join(f" {m}" for m in model) + " (python -m rtcohand_drake.run takes the same --context-file)")
 
 
 def entry_point() -> None:
