@@ -1,6 +1,7 @@
 """How well the policy reads each of a user's gestures, from that user's own labelled clips.
 
-    python -m rtcohand_drake.context_reading --context-file PATH.h5 [PATH.h5 ...] [--context-user USER] [--model PATH.pt]
+    python -m rtcohand_drake.context_reading --context-file PATH.h5 [PATH.h5 ...] [--context-user USER]
+        [--model PATH.pt] [--folds 6] [--rate-hz 10] [--no-progress]
     python -m rtcohand_drake.context_reading --user u10      # a built-in simulated user
 
 Before a new person drives the arm, their labelled clips can tell how well
