@@ -42,6 +42,7 @@ from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
 from rtcohand_drake.cell.robot_files import models_dir
+from rtcohand_drake.repo_paths import repo_relative
 from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
 from rtcohand_drake.learning.policy_file import load_policy
 from rtcohand_drake.systems.policy import CchpPolicy
@@ -172,7 +173,7 @@ def main():
     args = p.parse_args()
     scenario = load_scenario(args.scenario)
     model = args.model if args.model is not None else models_dir() / scenario.policy.model
-    print(f"policy: {model}")
+    print(f"policy: {repo_relative(model)}")  # its output is kept in docs/results
     if args.responsive_window is not None:
         scenario.command_filter.responsive_window = args.responsive_window
         print(f"responsive window: {args.responsive_window}")

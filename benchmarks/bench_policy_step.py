@@ -33,7 +33,9 @@ def percentile_ms(times):
 
 def load_or_build(path: pathlib.Path):
     if path.is_file():
-        return torch.jit.load(str(path)), str(path)
+        from rtcohand_drake.repo_paths import repo_relative
+
+        return torch.jit.load(str(path)), repo_relative(path)  # the results file is committed
     from rtcohand_drake.learning.export import script_policy
     from rtcohand_drake.learning.nets.cchp import Cchp
 

@@ -89,6 +89,8 @@ def main(argv=None) -> int:
     p.add_argument("--compare-to", type=Path, default=None, help="another checkout, measured interleaved")
     p.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
     args = p.parse_args(argv)
+    from rtcohand_drake.repo_paths import checkout_commit
+
     checkouts = {"this": REPO} | ({"other": args.compare_to.resolve()} if args.compare_to else {})
     rows = {name: {"fresh": [], "warm": []} for name in checkouts}
     for _ in range(args.repeats):
@@ -103,7 +105,8 @@ def main(argv=None) -> int:
     for name, path in checkouts.items():
         f = summary(rows[name]["fresh"])
         w = summary(rows[name]["warm"][1:])
-        result[name] = {"checkout": str(path), "fresh": f, "warm_after_first": w, "warm_first": rows[name]["warm"][0],
+        # The checkout by its commit: the results file is committed, and its folder means nothing elsewhere.
+        result[name] = {"checkout": checkout_commit(path), "fresh": f, "warm_after_first": w, "warm_first": rows[name]["warm"][0],
                         "rows": rows[name]}
         print(f"| {name} ({path.name}) | {f['total_s']:.1f} s | {f['sim_wall_s']:.1f} s ({f['sim_s']:.1f} s simulated) "
               f"| {f['startup_s']:.1f} s | {f['realtime_factor']:.1f}x | {w['total_s']:.1f} s | {w['startup_s']:.1f} s |")

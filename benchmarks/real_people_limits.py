@@ -235,6 +235,7 @@ def main(argv=None) -> int:
     from rtcohand_drake.learning.knn_reference import KnnReference
     from rtcohand_drake.learning.ridge_reference import RidgeReference
     from rtcohand_drake.learning.train import load_clips
+    from rtcohand_drake.repo_paths import repo_relative
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", required=True, type=Path)
@@ -248,7 +249,7 @@ def main(argv=None) -> int:
     if not episodes:
         raise SystemExit(f"{args.data}: no Person episodes (clips of split 'test' with 'train' clips of the same user)")
     result = {
-        "data": str(args.data), "episodes": len(episodes),
+        "data": repo_relative(args.data), "episodes": len(episodes),  # the results file is committed
         "late_oracle": {f"{d:g} s": late_oracle(episodes, d) for d in DELAYS_S},
         "error_by_phase": {
             f"ridge {int(args.ridge[0])} {args.ridge[1]:g}": error_by_phase(

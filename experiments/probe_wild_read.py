@@ -28,6 +28,7 @@ from rtcohand_drake.data.dataset import load_policy_clips
 from rtcohand_drake.data.sampling import evaluation_episodes
 from rtcohand_drake.learning.batching import collate_context
 from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.repo_paths import repo_relative
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.systems.safety.rules import confidence_scale
 
@@ -61,7 +62,7 @@ def main() -> None:
         safety.confidence_floor_variance = args.confidence_floor_variance
     policy = load_policy(args.model)
     clips = load_policy_clips(args.data)
-    print(f"policy {args.model}; confidence scale: 1 up to v = {safety.confidence_full_variance}, "
+    print(f"policy {repo_relative(args.model)}; confidence scale: 1 up to v = {safety.confidence_full_variance}, "
           f"{safety.confidence_floor} from v = {safety.confidence_floor_variance}")
     print("| setting | episodes | mean, share of zero twist | scaled by confidence, share of zero twist "
           "| steps slowed | v median / 90th percentile |")

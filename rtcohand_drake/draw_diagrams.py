@@ -84,10 +84,14 @@ def dot_texts() -> dict[str, str]:
     return {name: canonical_dot(build().GetGraphvizString(max_depth=1)) for name, build in DIAGRAMS.items()}
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.draw_diagrams", description=__doc__.split("\n")[0])
     p.add_argument("--check", action="store_true", help="only check that diagrams/*.dot are current")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
     texts = dot_texts()
     if args.check:
         stale = [n for n, t in texts.items()

@@ -3,7 +3,7 @@
     python -m rtcohand_drake.record --out ME.h5 --user ME
         [--camera N | --video PATH | --simulated-user uXX [--population-seed N]]
         [--camera-calibration FILE] [--no-meshcat] [--only Tx+,Rz-] [--seed N] [--scenario S]
-        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]] [--style hold|stroke]
+        [--labels cue|aruco [--marker-length-m 0.05] [--marker-id 0]] [--style hold|stroke] [--verbose]
 
 The protocol is the paper's: for each target motion Meshcat shows a cue, a
 workpiece moving the way the person should ask for, after a countdown; the
@@ -29,7 +29,9 @@ the reading check gives advice for that style.
 Clips are written per the gesture dataset contract, the person as the user
 (group "out-sample", split "train"). Then the reading check
 (`rtcohand_drake.analysis.context_reading`) runs on the new file and names
-the motions read poorly, to record again with `--only`.
+the motions read below half their size; the last lines give the command that
+records just those again (`--only`, into a second file) and how to read both
+files as one context (`--context-file FIRST.h5 SECOND.h5`).
 
 `--labels aruco` is the paper's human-human protocol instead: a handler
 moves an object carrying an ArUco marker in front of the camera as the
@@ -358,6 +360,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--marker-id", type=int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
     p.add_argument("--style", choices=STYLES, default="hold",
                    help="hold: keep the motion going while the part should move; stroke: one short stroke")
+    p.add_argument("--verbose", action="store_true",
+                   help="camera or video: show MediaPipe's and LiteRT's own INFO and WARNING lines on stderr "
+                        "(hidden by default)")
     return p
 
 
@@ -386,20 +391,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         from rtcohand_drake.systems.gestures.camera import make_tracker
 
         scenario = load_scenario(args.scenario)
-        view = None
-        if not args.no_meshcat:
-            from pydrake.geometry import Meshcat, MeshcatParams
-
-            meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
-            print(f"Meshcat: {meshcat.web_url()} (the cue)", flush=True)
-            view = CueView(meshcat)
         marker = None
         if args.labels == "aruco":
             from rtcohand_drake.vision.aruco import MarkerConfig, MarkerTracker
 
             marker = MarkerTracker(MarkerConfig(marker_length_m=args.marker_length_m, marker_id=args.marker_id))
-        tracker = make_tracker(scenario, args.camera, args.video, args.camera_calibration, marker_tracker=marker)
+        tracker = make_tracker(scenario, args.camera, args.video, args.camera_calibration, marker_tracker=marker,
+                               verbose=args.verbose)
         try:
+            view = None
+            if not args.no_meshcat:
+                from pydrake.geometry import Meshcat, MeshcatParams
+
+                meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
+                print(f"Meshcat: {meshcat.web_url()} (the cue)", flush=True)
+                view = CueView(meshcat)
             clips = record_tracked(tracker, motions_list, protocol, args.user, live=args.camera is not None,
                                    view=view, labels=args.labels)
         finally:
@@ -420,14 +426,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rtcohand_drake.analysis import context_reading
 
     print("reading check:", flush=True)
-    context_reading.main(["--context-file", str(args.out), "--context-user", args.user, "--scenario", args.scenario]
-                         + (["--model", str(args.model)] if args.model else []))
+    model = ["--model", str(args.model)] if args.model else []
+    weak = context_reading.check(["--context-file", str(args.out), "--context-user", args.user,
+                                  "--scenario", args.scenario] + model)
     missing = [motion_name(m) for m in ONE_MOTIONS if motion_name(m) not in {c.clip_id[3:] for c in clips}]
     if missing and not args.only:
         print("not recorded (no hand seen): " + ", ".join(missing))
-    print(f"to record a motion again: python -m rtcohand_drake.record --out OTHER.h5 --user {args.user} "
-          f"--style {args.style} --only Tx+,Rz- (then give both files' clips as context)")
+    else:
+        missing = []
+    print(again_hint(args, weak + [m for m in missing if m not in weak], model))
     return 0
+
+
+def again_hint(args, motions: Sequence[str], model: Sequence[str] = ()) -> str:
+    """What to do about the motions the check read below half their size (or did not see): the
+    command that records them again, and how to use both files as one context."""
+    if not motions:
+        return "every motion reads at least half its size: nothing to record again"
+    again = args.out.with_name(f"{args.out.stem}_again{args.out.suffix or '.h5'}")
+    both = f"--context-file {args.out} {again} --context-user {args.user}"
+    return (f"to record {', '.join(motions)} again: python -m rtcohand_drake.record --out {again} "
+            f"--user {args.user} --style {args.style} --only {','.join(motions)}\n"
+            f"then read both files' clips as one context: python -m rtcohand_drake.context_reading {both}"
+            + "".join(f" {m}" for m in model) + " (python -m rtcohand_drake.run takes the same --context-file)")
 
 
 def entry_point() -> None:

@@ -1,13 +1,14 @@
 """`python -m rtcohand_drake.run`: build the diagram for a scenario, simulate it, log it.
 
     python -m rtcohand_drake.run [--scenario NAME | PATH.yaml]   # default: the built-in inspection
-        [--duration S] [--realtime-rate R] [--no-meshcat | --no-wait] [--seed N]
+        [--duration S] [--realtime-rate R] [--no-meshcat] [--no-wait] [--seed N]
         [--gesture-source synthetic|replay|camera|scripted|joystick]
         [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
         [--camera N | --video PATH] [--camera-calibration FILE]   # with --gesture-source camera
-        [--context-file PATH.h5 [--context-user USER]] [--user ID [--population-seed N]]
+        [--context-file PATH.h5 [PATH.h5 ...] [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
         [--hardware --robot-ip IP [--dry-run]]                  # the real arm (kortex_station)
+        [--verbose]                                             # the libraries' own log lines too
 
 Prints the Meshcat URL (unless --no-meshcat), then a summary: faces
 inspected, completion time, peak workpiece speeds and safety events. Without
@@ -21,6 +22,7 @@ exits with status 2 and one line on stderr naming the file and the problem.
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 import time
@@ -62,8 +64,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-calibration", type=Path, default=None,
                    help="camera source: intrinsics and the camera's pose in the user frame (YAML; "
                         "default: a webcam facing the person, with a warning)")
-    p.add_argument("--context-file", type=Path, default=None, help="a user's own labelled clips as context")
-    p.add_argument("--context-user", default=None, help="which user of --context-file")
+    p.add_argument("--context-file", type=Path, nargs="+", action="extend", default=None, metavar="PATH.h5",
+                   help="a user's own labelled clips as context; several files are read together as one "
+                        "context (say a first session and one re-recording weak motions)")
+    p.add_argument("--context-user", default=None,
+                   help="which user of --context-file (needed when the files hold more than one)")
     p.add_argument("--user", default=None, help="the simulated person's user id (synthetic source)")
     p.add_argument("--population-seed", type=int, default=None,
                    help="the generated population the simulated person comes from (data.generate --seed; "
@@ -77,6 +82,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--hardware", action="store_true", help="drive the real arm (Kortex API) instead of the simulation")
     p.add_argument("--robot-ip", default=None, help="the arm's address (with --hardware)")
     p.add_argument("--dry-run", action="store_true", help="with --hardware: connect and show the arm, send no motion")
+    p.add_argument("--verbose", action="store_true",
+                   help="show the libraries' own INFO lines on stderr (hidden by default): Drake's, and with "
+                        "the camera source MediaPipe's and LiteRT's INFO and WARNING lines")
     return p
 
 
@@ -124,19 +132,31 @@ def _build(args, scenario, meshcat, station=None):
         setup = make_gesture_source(args.gesture_source, args, scenario)
         return build_run_diagram(scenario, source=setup.source, meshcat=meshcat, station=station,
                                  gesture_source=args.gesture_source), setup.end_time
-    from rtcohand_drake.data.dataset import context_pieces, missing_motions
-    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.policy_file import load_policy
-    from rtcohand_drake.systems.policy import CchpPolicy
 
     model_path = _resolve_model(args, scenario)
     model = load_policy(model_path)  # a bad model file fails before anything else is built
     model.source_path = str(model_path)
     setup = make_gesture_source(args.gesture_source, args, scenario)
+    try:
+        return _build_with_policy(args, scenario, meshcat, station, model, setup)
+    except BaseException:
+        if hasattr(setup.source, "close"):
+            setup.source.close()  # a camera source releases its camera and tracker on every path
+        raise
+
+
+def _build_with_policy(args, scenario, meshcat, station, model, setup):
+    from rtcohand_drake.data.dataset import context_pieces, missing_motions
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+    from rtcohand_drake.diagram import build_run_diagram
+    from rtcohand_drake.systems.policy import CchpPolicy
+
     rate = scenario.policy.rate_hz
     path_shape = int(model.feature_dim) > FEATURE_DIM  # a policy file that reads the hand's path and shape
+    user = None
     if args.context_file is not None:
-        pieces, _ = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
+        pieces, user = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
     elif setup.default_context is not None:
         pieces = setup.default_context(path_shape=path_shape)
     else:
@@ -144,9 +164,12 @@ def _build(args, scenario, meshcat, station=None):
                          "(the user's own labelled clips)")
     missing = missing_motions(pieces)
     if missing:
+        record = f"python -m rtcohand_drake.record --only {','.join(missing)}"
+        if user is not None:  # into a file of their own, given after the others
+            record = (f"python -m rtcohand_drake.record --out MORE.h5 --user {user} --only {','.join(missing)}, "
+                      "then add MORE.h5 to --context-file")
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
-              f"read wrongly; record them: python -m rtcohand_drake.record --only {','.join(missing)}",
-              file=sys.stderr)
+              f"read wrongly; record them: {record}", file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight,
                         rest_release=scenario.policy.rest_release)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
@@ -164,6 +187,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # Imports that load pydrake, torch and the models come after the argument checks.
     from pydrake.systems.analysis import Simulator
+
+    if not args.verbose:  # Drake's INFO lines (contexts allocated; Meshcat's address, printed below)
+        logging.getLogger("drake").setLevel(logging.WARNING)
 
     from rtcohand_drake.diagram import collect_run_log, peak_speeds
     from rtcohand_drake.analysis.inspection import score_run_log

@@ -24,3 +24,13 @@ def load_script():
         return loaded[relative]
 
     return load
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_report_header(config, start_path):
+    """The session header names the repository, not the folder it was checked out in: a soak's
+    output is kept in docs/results/soak/ (docs/safety.md), and results hold no machine's paths."""
+    headers = yield
+    root = str(config.rootpath)
+    relative = lambda line: line.replace(root, ".") if line.startswith("rootdir: ") else line  # noqa: E731
+    return [[relative(line) for line in lines] if isinstance(lines, list) else relative(lines) for lines in headers]

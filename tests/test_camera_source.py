@@ -6,6 +6,8 @@ its keypoints are known, so the tracker's landmarks can be checked against them.
 
 import math
 import socket
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -222,6 +224,63 @@ def test_missing_video_or_calibration_is_one_line(tmp_path, context_file):
     with pytest.raises(InputError, match="no such camera calibration file") as err:
         main(["--video", str(missing), "--camera-calibration", str(tmp_path / "none.yaml"), *common])
     assert "none.yaml" in str(err.value)
+
+
+def _stderr_of(*argv, timeout=180):
+    done = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=timeout)
+    return done.returncode, done.stderr
+
+
+def test_bad_video_stderr_is_exactly_one_line(tmp_path):
+    """A missing video file is one line, found before MediaPipe loads; a file that is no video closes
+    the landmarker already started: no finaliser's traceback, no library log lines."""
+    missing = tmp_path / "none.avi"
+    for module, args in (("rtcohand_drake.run", ["--no-meshcat"]),
+                         ("rtcohand_drake.record", ["--out", str(tmp_path / "me.h5"), "--user", "ME", "--no-meshcat"])):
+        status, err = _stderr_of("-m", module, "--video", str(missing), *args)
+        assert status == 2 and err.splitlines() == [f"{module}: error: {missing}: no such video file"], err
+    junk = tmp_path / "junk.avi"
+    junk.write_text("not a video\n")
+    calibration = tmp_path / "cam.yaml"
+    calibration.write_text("camera_position_m: [0, 0.6, 0]\n")
+    status, err = _stderr_of("-m", "rtcohand_drake.run", "--video", str(junk), "--camera-calibration",
+                             str(calibration), "--no-meshcat")
+    assert status == 2 and err.splitlines() == [
+        f"rtcohand_drake.run: error: {junk}: cannot open it as a video stream"], err
+
+
+LANDMARKER_LEFT_OPEN = """
+import sys
+import numpy as np
+from rtcohand_drake.vision.landmarker import HandLandmarker
+lm = HandLandmarker(video=True, verbose=sys.argv[1] == "verbose")
+lm.detect(np.full((240, 320, 3), 128, np.uint8), 0.1)
+print("the program's own line", file=sys.stderr)
+"""  # and exits without closing it
+
+
+def test_library_lines_are_told_from_the_programs_own():
+    from rtcohand_drake.vision.library_log import library_line
+
+    theirs = [b"INFO: [environment.cc:36] Creating LiteRT environment with options\n",
+              b"WARNING: Read-only tensor #3 (model_1/model/up_sampling2d_1/mul) has an unaligned buffer\n",
+              b"INFO: Created TensorFlow Lite XNNPACK delegate for CPU.\n",
+              b"WARNING: Logging before InitGoogle() is written to STDERR\n",
+              b"W0000 00:00:1796554543.892350    3745 inference_runner_litert.cc:1433] Input tensor memory\n",
+              b"I0000 00:00:1796554543.908870    3745 landmark_projection_calculator.cc:81] Using NORM_RECT\n"]
+    ours = [b"warning: no --camera-calibration given: using the defaults\n", b"INFO:drake:Meshcat listening\n",
+            b"rtcohand_drake.run: error: x.avi: no such video file\n", b"Traceback (most recent call last):\n",
+            b"E0000 00:00:1796554543.9    3745 calculator_graph.cc:12] a MediaPipe error stays\n",
+            b"\rreading u10's clips:  25%|###\n"]
+    assert all(library_line(line) for line in theirs) and not any(library_line(line) for line in ours)
+
+
+def test_landmarker_log_lines_only_with_verbose_and_closed_at_exit():
+    status, err = _stderr_of("-c", LANDMARKER_LEFT_OPEN, "quiet", timeout=120)
+    assert status == 0 and err.splitlines() == ["the program's own line"], err
+    status, err = _stderr_of("-c", LANDMARKER_LEFT_OPEN, "verbose", timeout=120)
+    assert status == 0 and "the program's own line" in err.splitlines()
+    assert "INFO" in err and "Exception ignored" not in err and "Traceback" not in err
 
 
 def test_live_tracker_thread_stamps_frames_and_freezes_at_the_end(tmp_path):

@@ -108,8 +108,21 @@ def test_cli_prints_a_row_per_motion(tmp_path, capsys):
 def test_cli_gives_no_advice_when_every_motion_reads(capsys):
     # The shipped policy reads every motion of the benchmark population's u10 (weakest: 0.76).
     status = run_cli(cr.main, ["--user", "u10"])
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert status == 0 and "| poor |" not in out and "poorly read" not in out
+    # A long check is not silent: its progress bar, on stderr, reaches every read (policy and references).
+    assert "reading u10's clips" in captured.err and "100%" in captured.err
+    assert "reading u10's clips" not in out
+
+
+def test_every_option_has_help():
+    """`--help` explains every option of the reading check and of the camera calibration."""
+    from rtcohand_drake.vision import calibrate
+
+    for parser in (cr.make_parser(), calibrate.make_parser()):
+        bare = [a.option_strings for a in parser._actions if not a.help]
+        assert not bare, (parser.prog, bare)
 
 
 @pytest.mark.parametrize("argv, expected", [

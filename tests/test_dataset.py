@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -267,3 +268,31 @@ def test_context_user_error_says_the_list_of_users_is_cut(tmp_path):
         context_pieces(path, None, 10.0)
     with pytest.raises(InputError, match=r"has no labelled clips.*\(users: .*, \.\.\. and 4 more\)$"):
         context_pieces(path, "nobody", 10.0)
+
+
+def test_context_from_several_files(tmp_path):
+    """`--context-file A.h5 B.h5`: one user's clips of both files, read as one context; one file as before."""
+    from rtcohand_drake.analysis.context_reading import clips_from_file
+    from rtcohand_drake.data.dataset import context_pieces
+    from rtcohand_drake.errors import InputError
+    from rtcohand_drake.run import make_parser
+
+    clips = generate_population(GeneratorConfig(), n_users=2, seed=4)
+    me = [c for c in clips if c.user == clips[0].user]
+    first, second, other = tmp_path / "first.h5", tmp_path / "second.h5", tmp_path / "other.h5"
+    write_dataset(first, me[:5])
+    write_dataset(second, me[5:8])
+    write_dataset(other, [c for c in clips if c.user != me[0].user][:3])
+    one, user = context_pieces(first, None, 10.0)
+    both, same = context_pieces([first, second], None, 10.0)
+    assert user == same == me[0].user and len(one) == 5 and len(both) == 8
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(one, both))  # the first file's clips come first
+    assert len(clips_from_file([first, second], user, 10.0)[0]) == 8
+    with pytest.raises(InputError, match=r"first\.h5 and .*other\.h5: hold 2 users; choose one"):
+        context_pieces([first, other], None, 10.0)
+    with pytest.raises(InputError, match=rf"other\.h5: user '{user}' has no labelled clips"):
+        context_pieces([first, other], user, 10.0)
+    # The command line takes one path as before, several after one flag, or the flag repeated.
+    parse = lambda *a: make_parser().parse_args(list(a)).context_file  # noqa: E731
+    assert parse("--context-file", "a.h5") == [Path("a.h5")]
+    assert parse("--context-file", "a.h5", "b.h5") == parse("--context-file", "a.h5", "--context-file", "b.h5")

@@ -101,3 +101,38 @@ def test_malformed_yaml(tmp_path):
 ])
 def test_bad_flags(args, fragment):
     _assert_one_line(_run(*args), fragment)
+
+
+def test_no_meshcat_and_no_wait_are_not_exclusive():
+    """Both flags are accepted together, and no usage line (argparse's, the module's, the docs')
+    shows them as alternatives."""
+    import re
+    from pathlib import Path
+
+    import rtcohand_drake.run as run
+
+    args = run.make_parser().parse_args(["--no-meshcat", "--no-wait"])
+    assert args.no_meshcat and args.no_wait
+    exclusive = re.compile(r"--no-meshcat\s*\|\s*--no-wait|--no-wait\s*\|\s*--no-meshcat")
+    repo = Path(__file__).resolve().parents[1]
+    usages = {"argparse": run.make_parser().format_usage(), "run.py": run.__doc__,
+              **{p.name: p.read_text() for p in [repo / "README.md", *(repo / "docs").glob("*.md")]}}
+    assert not [name for name, text in usages.items() if exclusive.search(text)]
+
+
+def test_missing_motions_warning_says_how_to_add_them_and_a_second_file_does(tmp_path, capsys):
+    """A context lacking motions names them and the command that records them into a further file;
+    that file given after the first (`--context-file A.h5 B.h5`) completes the context."""
+    from rtcohand_drake.run import main
+
+    clips = [c for c in generate_population(GeneratorConfig(), n_users=1, seed=1)]
+    first, more = tmp_path / "first.h5", tmp_path / "more.h5"
+    write_dataset(first, [c for c in clips if list(c.active_dims) == [0]])
+    write_dataset(more, [c for c in clips if list(c.active_dims) != [0]])
+    common = ["--no-meshcat", "--duration", "0.2", "--realtime-rate", "0"]
+    assert main([*common, "--context-file", str(first)]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "holds no example" in line]
+    assert len(warning) == 1 and "Tx+" not in warning[0].split("record them")[0]
+    assert f"--user {clips[0].user} --only Ty+," in warning[0] and "add MORE.h5 to --context-file" in warning[0]
+    assert main([*common, "--context-file", str(first), str(more)]) == 0
+    assert "holds no example" not in capsys.readouterr().err

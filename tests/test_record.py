@@ -40,13 +40,36 @@ def test_simulated_session_writes_a_contract_valid_file(tmp_path, capsys):
     assert np.array_equal(read_dataset(again)[0].keypoints, clips[0].keypoints, equal_nan=True)
 
 
-def test_reading_check_names_the_motions(tmp_path, capsys):
+def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
+    """The closing hint records again exactly the motions the check read below its threshold, and
+    says how to read both files as one context; with none, it says there is nothing to record."""
+    from rtcohand_drake.analysis import context_reading
+
     out = tmp_path / "few.h5"
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
                  "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
     text = capsys.readouterr().out
     assert "| Tx+ | 1 |" in text and "| Rz- | 1 |" in text
-    assert "read below half their size:" in text and "--only" in text
+    gains = {line.split("|")[1].strip(): float(line.split("|")[3]) for line in text.splitlines()
+             if line.startswith("| ") and line[2:4] in context_reading.MOTION_NAMES}
+    # A stricter threshold, between the weakest and the best read motion, makes some of them weak.
+    threshold = (min(gains.values()) + max(gains.values())) / 2
+    monkeypatch.setattr(context_reading, "READS", threshold)
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
+    text = capsys.readouterr().out
+    weak = [m for m in ("Tx+", "Tx-", "Rz+", "Rz-") if gains[m] < threshold]
+    assert 0 < len(weak) < 4
+    again = tmp_path / "few_again.h5"
+    assert f"read below half their size: {', '.join(weak)}" in text
+    assert (f"python -m rtcohand_drake.record --out {again} --user ME --style hold --only {','.join(weak)}"
+            in text)
+    assert f"--context-file {out} {again} --context-user ME" in text
+    monkeypatch.setattr(context_reading, "READS", -10.0)
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Rz-"]) == 0
+    text = capsys.readouterr().out
+    assert "nothing to record again" in text and "--only" not in text.split("reading check:")[1]
 
 
 def test_reading_check_uses_the_policy_file_given(tmp_path, capsys):

@@ -1,6 +1,7 @@
 """How well the policy reads each of a user's gestures, from that user's own labelled clips.
 
-    python -m rtcohand_drake.context_reading --context-file PATH.h5 [--context-user USER] [--model PATH.pt]
+    python -m rtcohand_drake.context_reading --context-file PATH.h5 [PATH.h5 ...] [--context-user USER]
+        [--model PATH.pt] [--folds 6] [--rate-hz 10] [--no-progress]
     python -m rtcohand_drake.context_reading --user u10      # a built-in simulated user
 
 Before a new person drives the arm, their labelled clips can tell how well
@@ -134,12 +135,14 @@ def split_groups(clips: Sequence[LabelledClip]) -> Groups:
 
 
 def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
-                   correction_weight: float = 1.0, lead: int = 0, groups: Groups | None = None) -> list:
+                   correction_weight: float = 1.0, lead: int = 0, groups: Groups | None = None,
+                   progress=None) -> list:
     """The policy's output (T, 6) over every clip, each played with the other folds as context
     (or as `groups` say; a clip no group plays gets None).
 
     `lead` > 0 pairs each context frame with the label `lead` frames later (the context's last
-    `lead` frames and first `lead` labels dropped): a read of what the person will want."""
+    `lead` frames and first `lead` labels dropped): a read of what the person will want.
+    `progress` (a tqdm bar, or anything with `update(n)`) advances by one per clip played."""
     import torch
 
     from rtcohand_drake.data.sampling import pack_context
@@ -153,16 +156,19 @@ def held_out_means(module, clips: Sequence[LabelledClip], folds: int = 6,
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
         for i in targets:
             means[i] = play_clip(module, clips[i].features, keys, values, z_mu, correction_weight)
+            if progress is not None:
+                progress.update(1)
     return means
 
 
 def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, window: int = 10,
                              lam: float = 100.0, groups: Groups | None = None, make=None,
-                             all_features: bool = False) -> list:
+                             all_features: bool = False, progress=None) -> list:
     """A fitted-to-the-person reference over every clip, solved on the other folds (or as `groups`
     say): by default the ridge regression (`rtcohand_drake.learning.ridge_reference`), or what
     `make()` gives (an unfitted reference with `fit(pieces)` and `predict(features)`). It reads the
-    36 velocities, or with `all_features` every column the clips carry (the kernel reference)."""
+    36 velocities, or with `all_features` every column the clips carry (the kernel reference).
+    `progress` advances by one per clip read, as in `held_out_means`."""
     from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.ridge_reference import RidgeReference
 
@@ -173,6 +179,8 @@ def held_out_reference_means(clips: Sequence[LabelledClip], folds: int = 6, wind
         reference = make().fit([(clips[i].features[:, :cut], clips[i].labels) for i in context])
         for i in targets:
             means[i] = reference.predict(clips[i].features[:, :cut])
+            if progress is not None:
+                progress.update(1)
     return means
 
 
@@ -225,26 +233,19 @@ def recording_style(path: Path) -> str:
     return protocol.get("style", "hold") if isinstance(protocol, dict) else "hold"
 
 
-def clips_from_file(path: Path, user: str | None, rate_hz: float,
+def clips_from_file(paths, user: str | None, rate_hz: float,
                     path_shape: bool = False) -> tuple[list[LabelledClip], str]:
-    """A user's labelled clips from a file (`path_shape`: with the hand's path and shape, `to_policy_clip`)."""
-    from rtcohand_drake.data.dataset import DatasetError, load_policy_clips
+    """A user's labelled clips from a dataset file, or from several together (`--context-file A.h5
+    B.h5`), and the user (`data.dataset.user_policy_clips`); `path_shape`: with the hand's path and
+    shape (`to_policy_clip`)."""
+    from rtcohand_drake.data.dataset import as_paths, user_policy_clips
 
-    try:
-        clips = [c for c in load_policy_clips(path, rate_hz, path_shape) if c.labels is not None]
-    except DatasetError as err:
-        raise InputError(str(err)) from None
-    users = sorted({c.user for c in clips})
-    if not clips:
-        raise InputError(f"{path}: no labelled clips")
-    if user is None:
-        if len(users) > 1:
-            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user")
-        user = users[0]
+    clips, user = user_policy_clips(paths, user, rate_hz, path_shape)
     mine = [LabelledClip(c.name, c.features, c.labels, tuple(int(d) for d in c.active_dims), c.split)
-            for c in clips if c.user == user]
+            for c in clips]
     if len(mine) < 2:
-        raise InputError(f"{path}: user {user!r} has {len(mine)} labelled clips; at least 2 are needed")
+        where = " and ".join(map(str, as_paths(paths)))
+        raise InputError(f"{where}: user {user!r} has {len(mine)} labelled clips; at least 2 are needed")
     return mine, user
 
 
@@ -269,10 +270,13 @@ def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None,
     return out
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.context_reading", description=__doc__.splitlines()[0])
-    p.add_argument("--context-file", type=Path, default=None, help="dataset file with the user's labelled clips")
-    p.add_argument("--context-user", default=None, help="which user of --context-file")
+    p.add_argument("--context-file", type=Path, nargs="+", action="extend", default=None, metavar="PATH.h5",
+                   help="dataset file(s) with the user's labelled clips; several files (say a first session "
+                        "and one re-recording weak motions) are read together as one context")
+    p.add_argument("--context-user", default=None,
+                   help="which user of --context-file (needed when the files hold more than one)")
     p.add_argument("--user", default=None, help="a built-in simulated user instead (u00 .. u14)")
     p.add_argument("--population-seed", type=int, default=None,
                    help="with --user: the generated population (data.generate --seed; default 0, the benchmark's)")
@@ -281,7 +285,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--model", type=Path, default=None, help="exported policy (default: the scenario's)")
     p.add_argument("--correction-weight", type=float, default=None,
                    help="w of the policy's output r + w (mean - r) (default: the scenario's)")
-    p.add_argument("--folds", type=int, default=6)
+    p.add_argument("--folds", type=int, default=6,
+                   help="with --protocol folds: how many groups the clips are split into; each group is read "
+                        "with the others as context (at least 2, default 6)")
     p.add_argument("--protocol", choices=("folds", "split"), default="folds",
                    help="folds: every clip read with the other folds as context; split: the clips of split "
                         "'test' read with those of split 'train' (recorded people, data.import_shrec17)")
@@ -289,8 +295,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the ridge reference's window (policy steps) and lambda (default 10 100)")
     p.add_argument("--knn", nargs=2, type=int, default=None, metavar=("WINDOW", "K"),
                    help="the nearest-neighbour reference's window (policy steps) and k (default 20 20)")
-    p.add_argument("--rate-hz", type=float, default=10.0)
-    args = p.parse_args(argv)
+    p.add_argument("--rate-hz", type=float, default=10.0,
+                   help="the policy rate (Hz) the clips are resampled to before they are read (default 10, "
+                        "the run's)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    return p
+
+
+def check(argv: Sequence[str] | None = None) -> list[str]:
+    """Runs the check (module docstring) and prints its table and advice; returns the motions read
+    below half their size (verdicts `weak` and `poor`), in Tx+ ... Rz- order."""
+    args = make_parser().parse_args(argv)
     if (args.context_file is None) == (args.user is None):
         raise InputError("command line: give either --context-file (with --context-user) or --user")
     if args.population_seed is not None and args.user is None:
@@ -330,19 +345,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         how = f"each read with the other {len(groups) - 1} of {len(groups)} folds as context"
     ridge = tuple(args.ridge) if args.ridge else RIDGE_DEFAULT
     knn = tuple(args.knn) if args.knn else KNN_DEFAULT
-    means = held_out_means(module, clips, correction_weight=weight, groups=groups)
-    readings = held_out_readings(module, clips, means=means)
-    references = {
-        f"ridge (window {int(ridge[0])}, lambda {ridge[1]:g})": held_out_reference_means(
-            clips, window=int(ridge[0]), lam=ridge[1], groups=groups),
-        f"nearest neighbours (window {knn[0]}, k {knn[1]})": held_out_reference_means(
-            clips, groups=groups, make=lambda: KnnReference(int(knn[0]), int(knn[1]))),
-    }
-    if wide:  # the clips carry the hand's path and shape: the kernel read of it, fitted alike
-        from rtcohand_drake.learning.kernel_reference import BANDWIDTH, LAMBDA, KernelReference
+    from tqdm import tqdm
 
-        references[f"kernel read of the path and shape (bandwidth {BANDWIDTH:g}, lambda {LAMBDA:g})"] = \
-            held_out_reference_means(clips, groups=groups, make=KernelReference, all_features=True)
+    played_count = sum(len(targets) for targets, _ in groups)
+    # Each played clip is read by the policy and by each reference (the kernel read with a wide file).
+    bar = tqdm(total=played_count * (4 if wide else 3), desc=f"reading {who}'s clips", unit="read",
+               file=sys.stderr, disable=args.no_progress, dynamic_ncols=True)
+    with bar:
+        means = held_out_means(module, clips, correction_weight=weight, groups=groups, progress=bar)
+        references = {
+            f"ridge (window {int(ridge[0])}, lambda {ridge[1]:g})": held_out_reference_means(
+                clips, window=int(ridge[0]), lam=ridge[1], groups=groups, progress=bar),
+            f"nearest neighbours (window {knn[0]}, k {knn[1]})": held_out_reference_means(
+                clips, groups=groups, make=lambda: KnnReference(int(knn[0]), int(knn[1])), progress=bar),
+        }
+        if wide:  # the clips carry the hand's path and shape: the kernel read of it, fitted alike
+            from rtcohand_drake.learning.kernel_reference import BANDWIDTH, LAMBDA, KernelReference
+
+            references[f"kernel read of the path and shape (bandwidth {BANDWIDTH:g}, lambda {LAMBDA:g})"] = \
+                held_out_reference_means(clips, groups=groups, make=KernelReference, all_features=True,
+                                         progress=bar)
+    readings = held_out_readings(module, clips, means=means)
     reference_gains = {label: {name: gain for name, _, gain, _ in
                                motion_table(held_out_readings(None, clips, means=m))}
                        for label, m in references.items()}
@@ -371,13 +394,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     shape = reference_gains[labels[1]]
     by_shape = [name for name in poor if shape.get(name, float("nan")) >= READS]
     unread = [name for name in poor if name not in by_shape]
-    style = recording_style(args.context_file) if args.context_file is not None else "hold"
+    # Strokes on purpose when every file given was recorded so (`record --style stroke`).
+    style = ("stroke" if args.context_file and all(recording_style(f) == "stroke" for f in args.context_file)
+             else "hold")
     if by_shape and style == "stroke":
         print(STROKE_STYLE_ADVICE.format(motions=", ".join(by_shape), only=",".join(by_shape)))
     elif by_shape:
         print(STROKE_ADVICE.format(motions=", ".join(by_shape)))
     if unread:
         print(POOR_ADVICE.format(motions=", ".join(unread)))
+    return weak
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    check(argv)
     return 0
 
 

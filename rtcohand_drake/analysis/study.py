@@ -247,7 +247,7 @@ def _int_list(text: str) -> list[int]:
     return [int(text)]
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.study", description=__doc__.splitlines()[0])
     p.add_argument("--populations", type=_int_list, nargs="+", default=[[100], [101], [102]],
                    help="population seeds, or ranges such as 100-119 (five out-sample people each)")
@@ -272,6 +272,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="run nothing: summarise the run logs already in the logs folder")
     p.add_argument("--resume", action="store_true",
                    help="summarise the runs whose logs are already in the logs folder, run only the others")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = make_parser()
     args = p.parse_args(argv)
     if args.runs_per_worker < 0:
         p.error("--runs-per-worker must be 0 (never restart) or more")
@@ -279,6 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error(f"--model {args.model}: no such file")
     model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
+    from rtcohand_drake.repo_paths import repo_relative
     from rtcohand_drake.scenario import load_scenario
 
     populations = [n for group in args.populations for n in group]
@@ -325,9 +331,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         table = f"The gesture conditions read the policy file `{args.model}`.\n\n" + table
     print(table)
     (args.out / "study.md").write_text(table)
+    def relative_log(run):  # the file is committed: its paths are the repository's (repo_paths)
+        return {**run, "log": repo_relative(run["log"])} if run and "log" in run else run
+
     summary = {"populations": populations, "run_seeds": seeds, "cap_s": cap, "conditions": args.conditions,
-               "model": model,
-               "results": {person: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
+               "model": repo_relative(model) if model else None,
+               "results": {person: {c: {str(s): relative_log(r) for s, r in runs.items()} for c, runs in by_c.items()}
                            for person, by_c in results.items()},
                "failed": failed,
                "comparisons": [dc.asdict(c) for c in compared]}

@@ -58,10 +58,14 @@ def solve_initial_q(scenario: Scenario, q_guess: np.ndarray | None = None) -> np
     return result.GetSolution(ik.q())
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.initial_pose", description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="inspection")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
     scenario = load_scenario(args.scenario)
     q = solve_initial_q(scenario, scenario.robot.q0_rad if any(scenario.robot.q0_rad) else None)
     print("robot:\n  q0_rad: [" + ", ".join(f"{x:.6f}" for x in q) + "]")

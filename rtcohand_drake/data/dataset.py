@@ -428,22 +428,52 @@ def _some(names: list[str], shown: int = 8) -> str:
     return ", ".join(names[:shown]) + more
 
 
-def context_pieces(path: Path, user: str | None, rate_hz: float, exclude=(), path_shape: bool = False):
-    """A user's own labelled clips from a dataset file, as (features, labels) pieces, and the user.
+def as_paths(paths) -> list:
+    """One path (str or path-like) or several, as a list."""
+    return [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
 
-    `user` may be None when the file holds one user; clips named in `exclude` are left out;
-    `path_shape` appends the hand's path and shape to the features (`to_policy_clip`).
+
+def user_policy_clips(paths, user: str | None, rate_hz: float, path_shape: bool = False):
+    """One user's labelled clips at the policy rate, from one dataset file or several read together
+    (`--context-file A.h5 B.h5`: a first session and a re-recording, say), and the user.
+
+    `user` may be None when the files hold one user between them. Each file must hold labelled
+    clips, and the user's among them; an error names the file.
     """
-    clips = [c for c in load_policy_clips(path, rate_hz, path_shape) if c.labels is not None]
-    users = sorted({c.user for c in clips})
-    if not clips:
-        raise InputError(f"{path}: no labelled clips to use as context")
+    paths = as_paths(paths)
+    per_file = []
+    for path in paths:
+        clips = [c for c in load_policy_clips(path, rate_hz, path_shape) if c.labels is not None]
+        if not clips:
+            raise InputError(f"{path}: no labelled clips to use as context")
+        per_file.append((path, clips))
     if user is None:
+        users = sorted({c.user for _, clips in per_file for c in clips})
         if len(users) > 1:
-            raise InputError(f"{path}: holds {len(users)} users; choose one with --context-user "
-                             f"({_some(users)})")
+            where = " and ".join(map(str, paths))
+            raise InputError(f"{where}: {'hold' if len(paths) > 1 else 'holds'} {len(users)} users; choose one "
+                             f"with --context-user ({_some(users)})")
         user = users[0]
-    pieces = [(c.features, c.labels) for c in clips if c.user == user and c.name not in exclude]
+    mine = []
+    for path, clips in per_file:
+        own = [c for c in clips if c.user == user]
+        if not own:
+            raise InputError(f"{path}: user {user!r} has no labelled clips to use as context "
+                             f"(users: {_some(sorted({c.user for c in clips}))})")
+        mine += own
+    return mine, user
+
+
+def context_pieces(paths, user: str | None, rate_hz: float, exclude=(), path_shape: bool = False):
+    """A user's own labelled clips from a dataset file or several (`user_policy_clips`), as
+    (features, labels) pieces, and the user.
+
+    Clips named in `exclude` are left out; `path_shape` appends the hand's path and shape to the
+    features (`to_policy_clip`).
+    """
+    clips, user = user_policy_clips(paths, user, rate_hz, path_shape)
+    pieces = [(c.features, c.labels) for c in clips if c.name not in exclude]
     if not pieces:
-        raise InputError(f"{path}: user {user!r} has no labelled clips to use as context (users: {_some(users)})")
+        raise InputError(f"{' and '.join(map(str, as_paths(paths)))}: user {user!r} has no labelled clips left "
+                         "to use as context")
     return pieces, user

@@ -45,7 +45,7 @@ def _fps(text: str) -> float:
     return value
 
 
-def main(argv: list[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="python -m rtcohand_drake.data.generate", description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True, help="output dataset file (.h5)")
     parser.add_argument("--users", type=_positive_int, default=15, help="number of users (2/3 in-sample)")
@@ -59,7 +59,11 @@ def main(argv: list[str] | None = None) -> int:
                              "centimetres now and then (GeneratorConfig's RECORDED_TRACKING; default: the "
                              "simulated camera's Gaussian jitter)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
 
     config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share,
                      **(RECORDED_TRACKING if args.recorded_tracking else {}))

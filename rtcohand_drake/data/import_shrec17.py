@@ -260,7 +260,7 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
             "commands": {u: len(m) for u, m in maps.items()}}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.data.import_shrec17",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--root", required=True, type=Path, help="the dataset's folder (holds gesture_1 .. gesture_14)")
@@ -277,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = make_parser().parse_args(argv)
     summary = import_shrec17(args.root, args.out, args.mapping, args.subjects, args.seed, args.group,
                              args.rest_s, args.ramp_s)
     print(f"wrote {args.out}: {summary['people']} people, {summary['clips']} clips, "

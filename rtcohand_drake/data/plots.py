@@ -114,13 +114,17 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def main(argv: list[str] | None = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="python -m rtcohand_drake.data.plots", description=__doc__.splitlines()[0])
     parser.add_argument("--data", required=True, help="dataset file (.h5)")
     parser.add_argument("--clip", required=True, help="USER/CLIP")
     parser.add_argument("--out", required=True, help="figure file (.png, .pdf, ...)")
     parser.add_argument("--rate", type=float, default=10.0, help="policy rate, Hz")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
     try:
         clips = read_dataset(args.data)
     except DatasetError as err:

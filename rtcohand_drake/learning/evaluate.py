@@ -543,7 +543,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
     return results
 
 
-def build_parser() -> argparse.ArgumentParser:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.evaluate", description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--checkpoint", required=True, nargs="+", help="checkpoints; those with the same name are seeds")
@@ -570,7 +570,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = make_parser().parse_args(argv)
     if args.names and len(args.names) != len(args.checkpoint):
         raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
     results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,

@@ -477,7 +477,7 @@ def export_model(model: Cchp, card: dict, out: os.PathLike) -> pathlib.Path:
     return out
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.export", description="Export a CCHP checkpoint as TorchScript.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--checkpoint", help="checkpoint written by python -m rtcohand_drake.train")
@@ -486,6 +486,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                    help="with --from-policy: a model option that holds no parameters, e.g. "
                         "phi_signed_square_prior=context (repeatable)")
     p.add_argument("--out", required=True, help="TorchScript file to write (.pt)")
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    p = make_parser()
     args = p.parse_args(argv)
     # TorchScript is the deployment format of docs/interfaces.md (the exported policy); its deprecation notice is noise here.
     warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")

@@ -215,14 +215,19 @@ def load_encoder(path: os.PathLike) -> Tuple[torch.jit.ScriptModule, dict]:
     return module, card
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.learning.hand_encoder",
+                                description=__doc__.splitlines()[0])
     p.add_argument("--data", nargs="+", required=True, help="labelled dataset files of the people to learn from")
     p.add_argument("--out", required=True, help="the encoder file to write")
     p.add_argument("--iterations", type=int, default=ITERATIONS, help="people drawn, one per step")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-minutes", type=float, default=0.0, help="stop after this long (0: no limit)")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = make_parser().parse_args(argv)
     torch.set_num_threads(max(1, min(2, os.cpu_count() or 1)))
     people = people_of(args.data)
     print(f"learning from {len(people)} people of {len(args.data)} file(s)", flush=True)

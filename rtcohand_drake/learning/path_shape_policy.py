@@ -447,8 +447,9 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
     return out
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.learning.path_shape_policy",
+                                description=__doc__.splitlines()[0])
     p.add_argument("--policy", required=True, help="an exported 36-feature CCHP policy file")
     p.add_argument("--out", required=True)
     p.add_argument("--blend", type=float, default=DEFAULT_BLEND, help="A: the kernel read's share of the mean")
@@ -467,7 +468,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         "time warp (SHARE 0: off)")
     p.add_argument("--encoder", default=None,
                    help="a learning.hand_encoder file: the kernel reads the path and shape through it")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
                                   args.encoder, tuple(args.commit), tuple(args.match))
     print(f"wrote {out}")

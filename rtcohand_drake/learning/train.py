@@ -378,7 +378,7 @@ _FLAG_HELP = {
 _FLAG_TYPE = {"tf_schedule": parse_tf_schedule}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def make_parser() -> argparse.ArgumentParser:
     """--data, --out, then one flag per TrainConfig field (--batch-size for batch_size), then the model's."""
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
@@ -398,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = make_parser().parse_args(argv)
     if args.steps < 1:
         raise InputError(f"--steps must be >= 1, got {args.steps}")
     for name in ("p_d", "p_u", "p_cxt"):

@@ -55,21 +55,33 @@ def _average_rotation(Rs) -> np.ndarray:
     return R if np.linalg.det(R) > 0 else U @ np.diag([1, 1, -1]) @ Vt
 
 
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.vision.calibrate", description=__doc__.splitlines()[0])
+    p.add_argument("--out", type=Path, required=True,
+                   help="the calibration file to write (YAML), for --camera-calibration of run and record")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--camera", type=int, help="a live camera (OpenCV camera number), read for up to 5 s")
+    src.add_argument("--image", type=Path, help="one image of the marker from the camera, instead of a live camera")
+    p.add_argument("--intrinsics", type=Path, default=None,
+                   help="a calibration file whose intrinsics (image size, focal length, principal point, "
+                        "distortion) are kept (default: a 60-degree webcam's)")
+    p.add_argument("--marker-position-m", type=float, nargs=3, default=[0.0, 0.2, 0.0], metavar=("X", "Y", "Z"),
+                   help="where the marker's centre is in the user frame, metres (X right, Y forward, Z up; "
+                        "default 0 0.2 0)")
+    p.add_argument("--marker-rpy-deg", type=float, nargs=3, default=[90.0, 0.0, 180.0], metavar=("R", "P", "Y"),
+                   help="the marker's roll-pitch-yaw in the user frame, degrees (default 90 0 180: upright, "
+                        "facing the camera in front of you; 60 0 180 tilts it back by 30 degrees)")
+    p.add_argument("--marker-length-m", type=float, default=0.05,
+                   help="the marker's side, black border included, metres (default 0.05)")
+    p.add_argument("--marker-id", type=int, default=0, help="the marker's id in DICT_4X4_50 (default 0)")
+    return p
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     import cv2
     import yaml
 
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.vision.calibrate", description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, required=True)
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--camera", type=int)
-    src.add_argument("--image", type=Path)
-    p.add_argument("--intrinsics", type=Path, default=None)
-    p.add_argument("--marker-position-m", type=float, nargs=3, default=[0.0, 0.2, 0.0])
-    p.add_argument("--marker-rpy-deg", type=float, nargs=3, default=[90.0, 0.0, 180.0])
-    p.add_argument("--marker-length-m", type=float, default=0.05)
-    p.add_argument("--marker-id", type=int, default=0)
-    args = p.parse_args(argv)
+    args = make_parser().parse_args(argv)
     from rtcohand_drake.vision.aruco import MarkerConfig, MarkerTracker
 
     calib = load_calibration(args.intrinsics) if args.intrinsics is not None else CameraCalibration()

@@ -44,10 +44,11 @@ class HandPipeline:
     """One frame (BGR) to the followed hand's keypoints (21, 3) in U, or None."""
 
     def __init__(self, calibration: CameraCalibration, config: Camera | None = None, video: bool = True,
-                 marker_tracker=None):
+                 marker_tracker=None, verbose: bool = False):
+        """`verbose`: MediaPipe's own log lines on stderr (`HandLandmarker`)."""
         self.calibration = calibration
         self.config = config or Camera()
-        self.landmarker = HandLandmarker(self.config, video=video)
+        self.landmarker = HandLandmarker(self.config, video=video, verbose=verbose)
         self.pose_filter = HandPoseFilter(self.config.pose_filter)
         self.marker_tracker = marker_tracker
         self.last_marker = None  # (R_UM, p_UM) in the last frame processed, or None

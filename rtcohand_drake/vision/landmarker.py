@@ -14,16 +14,32 @@ Each frame is blurred a little first (`Camera.blur_sigma_px`): on real
 footage with pixel-level noise (a GIF's dithered palette) the palm detector
 found no hand in two of ten clips, and after a Gaussian blur of 0.65 px
 it finds one in 93-100 % of the frames of every clip (docs/own_hand.md).
+
+MediaPipe and LiteRT write about a dozen INFO and WARNING lines of their own
+to stderr when a landmarker starts, on its first frames and when it closes.
+Unless `verbose=True` (the commands' `--verbose`), they are kept off stderr
+while the landmarker is open (`rtcohand_drake.vision.library_log`).
+
+A landmarker is closed by `close()`, by its `with` block, when it is
+garbage-collected, or at the latest when the interpreter exits. MediaPipe
+closes through a thread pool that Python shuts down before the `atexit`
+handlers run, and its own finaliser fails later still (as modules are torn
+down), so the landmarkers left open are closed from the threads' exit hook
+(`threading._register_atexit`, where `concurrent.futures` registers its own),
+which runs before the pool's.
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
+import threading
+import weakref
 from pathlib import Path
 
 import numpy as np
 
 from rtcohand_drake.errors import InputError
+from rtcohand_drake.vision import library_log
 from rtcohand_drake.vision.config import Camera
 
 MODEL_FILE = "hand_tracking/hand_landmarker.task"
@@ -48,6 +64,35 @@ class HandDetection:
         return float(np.linalg.norm(self.image_px.max(axis=0) - self.image_px.min(axis=0)))
 
 
+def _close_landmarker(landmarker, hidden: bool) -> None:
+    try:
+        landmarker.close()
+    finally:
+        if hidden:
+            library_log.release()
+
+
+_OPEN: "weakref.WeakSet[HandLandmarker]" = weakref.WeakSet()
+_exit_hook: list = []
+
+
+def _close_open_landmarkers() -> None:
+    for landmarker in list(_OPEN):
+        landmarker.close()
+
+
+def _close_at_exit(landmarker: "HandLandmarker") -> None:
+    """Closes `landmarker` at exit if it is still open then (module docstring)."""
+    _OPEN.add(landmarker)
+    if not _exit_hook:
+        # Registered after MediaPipe started its thread pool, so it runs before the pool's shutdown
+        # (the hooks run last registered first).
+        register = getattr(threading, "_register_atexit", None)  # CPython 3.9 and later
+        if register is not None:
+            register(_close_open_landmarkers)
+        _exit_hook.append(_close_open_landmarkers)
+
+
 def _import_mediapipe():
     try:
         import mediapipe as mp
@@ -59,9 +104,12 @@ def _import_mediapipe():
 
 
 class HandLandmarker:
-    """One MediaPipe hand landmarker. `video=True`: frames of one stream, in time order (it tracks)."""
+    """One MediaPipe hand landmarker. `video=True`: frames of one stream, in time order (it tracks).
 
-    def __init__(self, config: Camera | None = None, video: bool = True, model: Path | None = None):
+    `verbose`: let MediaPipe's own log lines through to stderr (module docstring)."""
+
+    def __init__(self, config: Camera | None = None, video: bool = True, model: Path | None = None,
+                 verbose: bool = False):
         mp, BaseOptions, vision = _import_mediapipe()
         path = Path(model) if model is not None else model_path()
         if not path.is_file():
@@ -75,13 +123,22 @@ class HandLandmarker:
             num_hands=config.num_hands, min_hand_detection_confidence=config.min_detection_confidence,
             min_hand_presence_confidence=config.min_presence_confidence,
             min_tracking_confidence=config.min_tracking_confidence)
-        try:
-            self._landmarker = vision.HandLandmarker.create_from_options(options)
-        except (RuntimeError, ValueError) as err:
-            raise InputError(f"{path}: not a usable hand landmarker bundle: {err}") from None
         self._last_ms = -1
         self._blur_sigma_px = config.blur_sigma_px
         self._blur_kernel_px = 2 * round(2 * config.blur_sigma_px) + 1
+        if not verbose:
+            library_log.hold()
+        try:
+            self._landmarker = vision.HandLandmarker.create_from_options(options)
+        except BaseException as err:
+            if not verbose:
+                library_log.release()
+            if isinstance(err, (RuntimeError, ValueError)):
+                raise InputError(f"{path}: not a usable hand landmarker bundle: {err}") from None
+            raise
+        self._close = weakref.finalize(self, _close_landmarker, self._landmarker, not verbose)
+        self._close.atexit = False  # too late then: `_close_at_exit`
+        _close_at_exit(self)
 
     def detect(self, frame_bgr: np.ndarray, time_s: float = 0.0) -> list[HandDetection]:
         """The hands in one BGR frame (OpenCV's order); `time_s` orders the frames of a video."""
@@ -109,7 +166,8 @@ class HandLandmarker:
         return hands
 
     def close(self) -> None:
-        self._landmarker.close()
+        """Closes the landmarker (once; later calls do nothing)."""
+        self._close()
 
     def __enter__(self):
         return self

@@ -59,28 +59,41 @@ class CameraGestureSource(KeypointGestureSource):
 
 
 def make_tracker(scenario, camera: int | None = None, video=None, calibration_file=None, warn=None,
-                 marker_tracker=None):
+                 marker_tracker=None, verbose: bool = False):
     """The tracker for `--camera N` or `--video PATH` (exactly one), with the calibration (and an
-    ArUco `marker_tracker` for the recorder's marker labels)."""
+    ArUco `marker_tracker` for the recorder's marker labels).
+
+    A missing video file is reported before MediaPipe loads; if the tracker cannot be made, the
+    landmarker already started is closed. `verbose`: MediaPipe's own log lines on stderr."""
+    from pathlib import Path
+
+    from rtcohand_drake.errors import InputError
     from rtcohand_drake.vision.calibration import DEFAULT_WARNING, CameraCalibration, load_calibration
     from rtcohand_drake.vision.capture import HandPipeline, LiveCameraTracker, VideoFileTracker
 
-    if calibration_file is not None:
-        calibration = load_calibration(calibration_file)
-    else:
+    calibration = load_calibration(calibration_file) if calibration_file is not None else None
+    if video is not None and not Path(video).is_file():
+        raise InputError(f"{video}: no such video file")
+    if calibration is None:
         calibration = CameraCalibration()
         (warn or (lambda m: print(f"warning: {m}", file=sys.stderr)))(DEFAULT_WARNING)
-    pipeline = HandPipeline(calibration, scenario.camera, video=True, marker_tracker=marker_tracker)
-    if video is not None:
-        return VideoFileTracker(video, pipeline)
-    return LiveCameraTracker(camera, pipeline)
+    pipeline = HandPipeline(calibration, scenario.camera, video=True, marker_tracker=marker_tracker,
+                            verbose=verbose)
+    try:
+        if video is not None:
+            return VideoFileTracker(video, pipeline)
+        return LiveCameraTracker(camera, pipeline)
+    except BaseException:
+        pipeline.close()
+        raise
 
 
 def from_options(options, scenario):
     """The `camera` source: `options.camera` (a device number) or `options.video` (a file)."""
     from rtcohand_drake.systems.gestures.registry import GestureSetup
 
-    tracker = make_tracker(scenario, options.camera, options.video, options.camera_calibration)
+    tracker = make_tracker(scenario, options.camera, options.video, options.camera_calibration,
+                           verbose=getattr(options, "verbose", False))
     source = CameraGestureSource(tracker, scenario.policy.rate_hz)
     # A video file ends with the file; a live camera runs until Ctrl-C (an endless stream).
     return GestureSetup(source, None, getattr(tracker, "duration_s", math.inf))
