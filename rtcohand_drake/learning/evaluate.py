@@ -27,8 +27,11 @@ nearest-neighbour read of the recent hand motion fitted alike
 people (Person) a fourth: a kernel read of the hand's path and shape fitted
 alike (`rtcohand_drake.learning.kernel_reference`).
 
-`--checkpoint` also takes exported policy files (`models/cchp_default.pt`):
-a CCHP policy is rebuilt as the model it was exported from.
+`--checkpoint` also takes exported policy files: a plain CCHP policy
+(`models/cchp_core.pt`) is rebuilt as the model it was exported from; a file
+that blends in a read fitted to the person (the default, `models/cchp_default.pt`,
+`learning.ridge_blend_policy`) or reads the hand's path and shape
+(`models/cchp_path_shape.pt`) is stepped as the policy box steps it.
 `--settings Person` reads recorded people (`rtcohand_drake.data.import_shrec17`):
 each user's held-out clips with their own train clips as context.
 
@@ -162,13 +165,15 @@ def stepped_policy_mse(module, episodes: Sequence) -> Dict:
     return {"elbo_loss": None, "mse": float(np.mean(mses)), "episodes": len(mses)}
 
 
-def _path_shape_policy(path: str):
-    """The loaded policy file when it reads the hand's path and shape (feature_dim > 36), else None."""
+def _stepped_policy(path: str):
+    """The loaded policy file when it is not a plain CCHP export (it reads the hand's path and shape,
+    `feature_dim` > 36, or blends a read fitted to the person, `learning.ridge_blend_policy`): such a
+    file is stepped as the policy box steps it. Else None."""
     from rtcohand_drake.learning.policy_file import load_policy, torch_archive_kind
 
     if pathlib.Path(path).is_file() and zipfile.is_zipfile(path) and torch_archive_kind(path, "policy") == "torchscript":
         module = load_policy(path)
-        if int(module.feature_dim) > FEATURE_DIM:
+        if int(module.feature_dim) > FEATURE_DIM or hasattr(module, "blend_of"):
             return module
     return None
 
@@ -426,12 +431,13 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         torch.set_num_threads(threads)
     loaded, stepped = [], {}
     for i, ck in enumerate(checkpoints):
-        module = _path_shape_policy(ck)
-        if module is not None:  # stepped as the policy box steps it, on its wider input
+        module = _stepped_policy(ck)
+        if module is not None:  # stepped as the policy box steps it (on its wider input, if it reads one)
             from rtcohand_drake.learning.export import read_model_card
 
             card = read_model_card(ck)
-            name = names[i] if names else "CCHP + path-and-shape read"
+            name = names[i] if names else ("CCHP + path-and-shape read" if int(module.feature_dim) > FEATURE_DIM
+                                           else "CCHP + ridge read")
             stepped[ck] = module
             loaded.append((name, ck, None, card))
             continue
@@ -441,7 +447,8 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
     rate = loaded[0][3].get("train_config", {}).get("rate_hz", 10.0) if loaded else 10.0
     # The wider input (the hand's path and shape) for the files that read it and for the kernel
     # reference on recorded people; the other models and references read its first 36 columns.
-    wide_settings = list(settings) if stepped else [s for s in settings if s == PERSON_SETTING]
+    wide_settings = (list(settings) if any(int(m.feature_dim) > FEATURE_DIM for m in stepped.values())
+                     else [s for s in settings if s == PERSON_SETTING])
     wide_clips = load_clips(data, rate, path_shape=bool(wide_settings))
     clips = ([dataclasses.replace(c, features=c.features[:, :FEATURE_DIM]) for c in wide_clips] if wide_settings
              else wide_clips)
@@ -456,7 +463,8 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
         entry = per_model.setdefault(name, {"checkpoints": [], "runs": []})
         entry["checkpoints"].append(str(ck))
         if model is None:
-            run = {s: stepped_policy_mse(stepped[ck], wide[s]) for s in settings}
+            narrow = int(stepped[ck].feature_dim) == FEATURE_DIM
+            run = {s: stepped_policy_mse(stepped[ck], episodes[s] if narrow else wide[s]) for s in settings}
         else:
             run = {s: evaluate_episodes(model, episodes[s], seed) for s in settings}
         entry["runs"].append(run)

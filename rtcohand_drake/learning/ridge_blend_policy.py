@@ -1,0 +1,280 @@
+"""A policy file that blends an exported CCHP policy with a ridge read fitted to the person's own clips.
+
+    python -m rtcohand_drake.learning.ridge_blend_policy --policy CCHP.pt --out FILE.pt
+        [--window 10] [--lambda 100] [--folds 4] [--rows 12]
+
+Some people are read best by a linear map of their own recent hand motion: their gestures are
+steady and their map from gesture to command is unlike anything the CCHP learned from other
+people. The file this writes keeps the exported CCHP whole, as a submodule, and adds the ridge
+read of `learning.ridge_reference` (the per-person reference) inside the file, fitted when the
+context is encoded:
+
+    encode_context:  X = the context steps' last `window` steps of the 36 hand-part velocities
+                     (zeros before a clip starts), standardised by their own mean and spread;
+                     W = (Xs^T Xs + lambda I)^-1 Xs^T (Y - mean(Y))
+    step:            r = xs(t) . W + mean(Y);  mean = B r + (1 - B) mean_CCHP,  read likewise
+
+B is chosen for each person when the context is encoded: the least-squares blend of the two reads
+over the person's own clips, each clip read with the clips of the other folds as context (clip b
+is in fold b mod F): the CCHP stepped over the clip (its own mean fed back, z the prior mean), the
+ridge fitted on the other folds. Over every step of at most `rows` clips spread over the context.
+With a context of one clip B is 0 (the CCHP alone).
+
+The CCHP is fed its own mean, carried in h after its state; then the last `window` - 1 steps of
+the input. `std`, the read variance and the attention are the CCHP's.
+
+Keys (K, D): [the ridge's mean, spread, W (row-major), mean(Y) and B, row-major over
+ceil(extra_size / K) columns | the CCHP's keys].
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+import warnings
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import nn
+
+from rtcohand_drake.data.hand_features import FEATURE_DIM
+from rtcohand_drake.errors import InputError, run_cli
+
+# The per-person ridge reference's settings (learning.ridge_reference, the `evaluate --ridge` default);
+# the folds and rows as the file for real hands chooses its blend (learning.path_shape_policy).
+DEFAULT_WINDOW = 10
+DEFAULT_LAMBDA = 100.0
+DEFAULT_FOLDS = 4
+DEFAULT_ROWS = 12
+
+
+class RidgeBlendPolicy(nn.Module):
+    """The exported CCHP policy blended, per person, with a ridge read of their own clips."""
+
+    def __init__(self, inner: torch.jit.ScriptModule, window: int = DEFAULT_WINDOW, lam: float = DEFAULT_LAMBDA,
+                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS):
+        super().__init__()
+        if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
+            raise InputError("the inner policy must read the 36 hand features and have step_read")
+        if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1):
+            raise InputError(f"window must be >= 1, lambda positive, folds >= 0 and rows >= 1; got {window}, {lam}, "
+                             f"{folds}, {rows}")
+        self.inner = inner
+        self.inner_hidden = int(inner.hidden_size)
+        self.feature_dim = FEATURE_DIM
+        self.window = int(window)
+        self.ridge_dim = self.window * FEATURE_DIM
+        self.ridge_lambda = float(lam)
+        self.blend_folds = int(folds)
+        self.blend_rows = int(rows)
+        self.hidden_size = self.inner_hidden + 6 + (self.window - 1) * FEATURE_DIM
+        self.latent_dim = int(inner.latent_dim)
+        self.query_size = int(inner.query_size)
+        self.motion_dim = 6
+        self.attention_heads = int(inner.attention_heads) if hasattr(inner, "attention_heads") else 1
+        # Extras: the standardisation's mean and spread, W, mean(Y), B.
+        self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 1
+
+    def _columns(self, k: int) -> int:
+        return (self.extra_size + k - 1) // k
+
+    def _windows(self, x: torch.Tensor) -> torch.Tensor:
+        """(T, 36) -> (T, window x 36): each step's last `window` steps, oldest first, zeros before the start."""
+        t = x.size(0)
+        padded = torch.cat([torch.zeros(self.window - 1, self.feature_dim, dtype=x.dtype), x])
+        return torch.cat([padded[j:j + t] for j in range(self.window)], 1)
+
+    def _rows(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, rows: List[int]
+              ) -> Tuple[torch.Tensor, torch.Tensor]:
+        xs: List[torch.Tensor] = []
+        ys: List[torch.Tensor] = []
+        for b in rows:
+            n = int(m[b].sum())
+            xs.append(self._windows(torch.nan_to_num(x_c[b, :n].to(torch.float64), 0.0, 0.0, 0.0)))
+            ys.append(torch.nan_to_num(y_c[b, :n].to(torch.float64), 0.0, 0.0, 0.0))
+        return torch.cat(xs), torch.cat(ys)
+
+    def _fit(self, x: torch.Tensor, y: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(mean, spread, W, mean(Y)) of the ridge on rows x (N, ridge_dim), y (N, 6)."""
+        mean = x.mean(0)
+        spread = torch.clamp(x.std(0, unbiased=False), min=1e-6)
+        xs = (x - mean) / spread
+        y_mean = y.mean(0)
+        a = torch.mm(xs.t(), xs) + self.ridge_lambda * torch.eye(self.ridge_dim, dtype=torch.float64)
+        w = torch.linalg.solve(a, torch.mm(xs.t(), y - y_mean))
+        return mean, spread, w, y_mean
+
+    @torch.jit.export
+    def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
+                       ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        if x_c.dim() != 3 or x_c.size(2) != self.feature_dim:
+            raise RuntimeError(f"encode_context: x_c must be (B, T, {self.feature_dim}), got {x_c.shape}")
+        m = mask.to(torch.bool)
+        if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
+            raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
+        keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c, y_c, m)
+        n_rows = x_c.size(0)
+        # A clip's steps are its first mask.sum() steps (the context is packed that way, pack_context).
+        x, y = self._rows(x_c, y_c, m, list(range(n_rows)))
+        mean, spread, w, y_mean = self._fit(x, y)
+        blend = torch.zeros(1, dtype=torch.float64)
+        if self.blend_folds > 0 and n_rows > 1:
+            blend = self._cross_validated_blend(x_c, y_c, m).view(1)
+        k = keys_in.size(0)
+        cols = self._columns(k)
+        extras = torch.zeros(k * cols, dtype=torch.float64)
+        extras[:self.extra_size] = torch.cat([mean, spread, w.reshape(-1), y_mean, blend])
+        return torch.cat([extras.view(k, cols).to(keys_in.dtype), keys_in], 1), values, z_mu, z_sigma
+
+    def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+        """B in [0, 1] (module docstring)."""
+        n_rows = x_c.size(0)
+        folds = min(self.blend_folds, n_rows)
+        stride = max(1, n_rows // self.blend_rows)
+        hi = self.inner_hidden
+        num = torch.zeros((), dtype=torch.float64)
+        den = torch.zeros((), dtype=torch.float64)
+        for f in range(folds):
+            out_rows: List[int] = []
+            in_rows: List[int] = []
+            for b in range(n_rows):
+                if b % folds == f:
+                    out_rows.append(b)
+                else:
+                    in_rows.append(b)
+            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, in_rows))
+            keep = torch.tensor(in_rows)
+            keys, values, z, _ = self.inner.encode_context(x_c[keep], y_c[keep], m[keep])
+            for b in out_rows:
+                if b % stride != 0:
+                    continue
+                x, y = self._rows(x_c, y_c, m, [b])
+                ridge = torch.mm((x - mean) / spread, w) + y_mean
+                h = torch.zeros(hi)
+                c = torch.zeros(hi)
+                y_prev = torch.zeros(6)
+                for t in range(x.size(0)):
+                    y_prev, _, h, c, _, _, _ = self.inner.step_read(
+                        torch.nan_to_num(x_c[b, t], 0.0, 0.0, 0.0), y_prev, h, c, keys, values, z)
+                    own = y_prev.to(torch.float64)
+                    gap = ridge[t] - own
+                    num += (gap * (y[t] - own)).sum()
+                    den += (gap * gap).sum()
+        if den <= 0:
+            return torch.zeros((), dtype=torch.float64)
+        return torch.clamp(num / den, 0.0, 1.0)
+
+    @torch.jit.export
+    def blend_of(self, keys: torch.Tensor) -> torch.Tensor:
+        """B, from the keys `encode_context` gave."""
+        k = keys.size(0)
+        extras = keys[:, :self._columns(k)].reshape(-1)
+        return extras[self.extra_size - 1]
+
+    @torch.jit.export
+    def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
+        """The CCHP's attention over the K context steps."""
+        return self.inner.attention_of(query, keys[:, self._columns(keys.size(0)):])
+
+    def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
+              values: torch.Tensor, z: torch.Tensor
+              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                         torch.Tensor]:
+        if x_t.numel() != self.feature_dim:
+            raise RuntimeError(f"step: x_t must have {self.feature_dim} features, got {x_t.numel()}")
+        k = keys.size(0)
+        cols = self._columns(k)
+        x_t = x_t.view(-1)
+        hi = self.inner_hidden
+        mean_i, std, h2, c2, read_i, v, query = self.inner.step_read(
+            x_t, h[hi:hi + 6], h[:hi], c[:hi], keys[:, cols:], values, z)
+        extras = keys[:, :cols].reshape(-1)
+        d = self.ridge_dim
+        window = torch.cat([h[hi + 6:], torch.nan_to_num(x_t, 0.0, 0.0, 0.0)])
+        xs = (window - extras[:d]) / extras[d:2 * d]
+        ridge = torch.mv(extras[2 * d:8 * d].view(d, 6).t(), xs) + extras[8 * d:8 * d + 6]
+        b = extras[8 * d + 6]
+        mean = b * ridge + (1.0 - b) * mean_i
+        read = (b * ridge + (1.0 - b) * read_i.mean(0)).view(1, 6)
+        h_next = torch.cat([h2, mean_i, window[self.feature_dim:]])
+        c_next = torch.cat([c2, torch.zeros(6 + (self.window - 1) * self.feature_dim)])
+        return mean, std, h_next, c_next, read, v, query
+
+    @torch.jit.export
+    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                             torch.Tensor, torch.Tensor]:
+        """(mean, std, h, c, read [1, 6], v [1], query [query_size]); `y_prev` is not used (the
+        CCHP's own mean is carried in h)."""
+        return self._step(x_t, h, c, keys, values, z)
+
+    @torch.jit.export
+    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                                      torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys), v
+
+    @torch.jit.export
+    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys)
+
+
+def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int = DEFAULT_WINDOW,
+                             lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS
+                             ) -> pathlib.Path:
+    """Writes the blended policy file, its model card extended with the ridge read's settings."""
+    from rtcohand_drake.learning.export import policy_and_card
+
+    inner, card = policy_and_card(policy)
+    if int(inner.feature_dim) != FEATURE_DIM:
+        raise InputError(f"{policy}: reads {int(inner.feature_dim)} features; give a 36-feature CCHP policy")
+    if "ridge_read" in card:
+        raise InputError(f"{policy}: already blends a ridge read; give the CCHP policy it was built from")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
+        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows).eval())
+    card = dict(card, ridge_read={
+        "inner_policy": pathlib.Path(policy).name, "window": window, "lambda": lam, "blend_folds": folds,
+        "blend_rows": rows,
+        "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; "
+                "blended with the CCHP by B chosen per person by folds of their clips"})
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
+    os.replace(tmp, out)
+    return out
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.learning.ridge_blend_policy",
+                                description=__doc__.splitlines()[0])
+    p.add_argument("--policy", required=True, help="an exported 36-feature CCHP policy file")
+    p.add_argument("--out", required=True, help="the policy file to write")
+    p.add_argument("--window", type=int, default=DEFAULT_WINDOW, help="policy steps the ridge reads (default 10: 1 s)")
+    p.add_argument("--lambda", dest="lam", type=float, default=DEFAULT_LAMBDA, help="the ridge's penalty (default 100)")
+    p.add_argument("--folds", type=int, default=DEFAULT_FOLDS,
+                   help="choose the blend per person by this many folds of their clips (0: the CCHP alone)")
+    p.add_argument("--rows", type=int, default=DEFAULT_ROWS, help="clips the choice of the blend steps through, at most")
+    args = p.parse_args(argv)
+    out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows)
+    print(f"wrote {out}")
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(run_cli(main, prog="rtcohand_drake.learning.ridge_blend_policy"))
+
+
+if __name__ == "__main__":
+    entry_point()

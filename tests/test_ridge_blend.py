@@ -1,0 +1,133 @@
+"""The default policy file: the CCHP blended, per person, with a ridge read of their own clips
+(learning.ridge_blend_policy), checked against its definition written out in numpy."""
+
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from rtcohand_drake.data.hand_features import FEATURE_DIM
+from rtcohand_drake.data.sampling import pack_context
+from rtcohand_drake.learning import ridge_blend_policy as rbp
+from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.learning.ridge_reference import RidgeReference
+
+MODELS = pathlib.Path(__file__).resolve().parents[1] / "models"
+CORE = MODELS / "cchp_core.pt"
+
+
+def _stepped(module, x, keys, values, z):
+    """(T, 6) means of a module stepped over x from a zero state, its own mean fed back."""
+    H = int(module.hidden_size)
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    out = []
+    with torch.no_grad():
+        for xt in torch.from_numpy(np.ascontiguousarray(x, np.float32)):
+            y, _, h, c, _ = module.step(xt, y, h, c, keys, values, z)
+            out.append(y.numpy().astype(np.float64))
+    return np.array(out)
+
+
+def _linear_person(rng, n_clips=12, steps=30, window=3):
+    """Clips whose labels are a fixed linear map of the last `window` steps of their features."""
+    mix = rng.normal(scale=0.05, size=(window * FEATURE_DIM, 6))
+    pieces = []
+    for _ in range(n_clips):
+        x = rng.normal(scale=0.3, size=(steps, FEATURE_DIM))
+        windows = np.hstack([np.vstack([np.zeros((window - 1 - j, FEATURE_DIM)), x[:steps - (window - 1 - j)]])
+                             for j in range(window)])
+        pieces.append((x.astype(np.float32), (windows @ mix).astype(np.float32)))
+    return pieces
+
+
+def _numpy_blend(inner, pieces, window, lam, folds, rows):
+    """B as the module docstring defines it, written out: clip b in fold b mod F, read with the
+    other folds' clips as context by the CCHP (stepped, its own mean fed back, z the prior mean)
+    and by the ridge fitted on them; least squares over every step of every stride-th clip."""
+    stride = max(1, len(pieces) // rows)
+    num = den = 0.0
+    for f in range(min(folds, len(pieces))):
+        inside = [p for b, p in enumerate(pieces) if b % folds != f]
+        ridge = RidgeReference(window, lam).fit(inside)
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(inside))
+        keys, values, z, _ = inner.encode_context(x_c, y_c, mask)
+        for b, (x, y) in enumerate(pieces):
+            if b % folds != f or b % stride:
+                continue
+            own = _stepped(inner, x, keys, values, z)
+            gap = ridge.predict(x) - own
+            num += float((gap * (y - own)).sum())
+            den += float((gap * gap).sum())
+    return float(np.clip(num / den, 0.0, 1.0))
+
+
+def test_the_blend_reads_as_its_definition(tmp_path):
+    rng = np.random.default_rng(0)
+    path = rbp.build_ridge_blend_policy(CORE, tmp_path / "blend.pt", window=3, lam=5.0, folds=3, rows=4)
+    blend, inner = load_policy(path), load_policy(CORE)
+    pieces = _linear_person(rng, n_clips=8)
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+    keys, values, z, _ = blend.encode_context(x_c, y_c, mask)
+    b = float(blend.blend_of(keys))
+    assert b == pytest.approx(_numpy_blend(inner, pieces, 3, 5.0, 3, 4), abs=2e-4)
+    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
+    assert torch.equal(keys[:, -inner_keys.shape[1]:], inner_keys) and torch.equal(values, inner_values)
+    target, _ = _linear_person(rng, n_clips=1)[0]
+    expected = (b * RidgeReference(3, 5.0).fit(pieces).predict(target)
+                + (1.0 - b) * _stepped(inner, target, inner_keys, inner_values, inner_z))
+    np.testing.assert_allclose(_stepped(blend, target, keys, values, z), expected, atol=2e-4)
+
+
+def test_a_person_a_linear_read_fits_is_read_as_well_as_that_read(tmp_path):
+    """On clips the test writes: a person whose commands are a linear map of their recent motion.
+    The per-person choice leans on the ridge, and the file reads their held-out clips about as well
+    as the ridge alone, far better than the CCHP alone."""
+    rng = np.random.default_rng(1)
+    path = rbp.build_ridge_blend_policy(CORE, tmp_path / "blend.pt", window=3, lam=1.0)
+    blend, inner = load_policy(path), load_policy(CORE)
+    person = _linear_person(rng, n_clips=16)
+    context, held_out = person[:12], person[12:]
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z, _ = blend.encode_context(x_c, y_c, mask)
+    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
+    ridge = RidgeReference(3, 1.0).fit(context)
+    errors = {"file": 0.0, "ridge": 0.0, "cchp": 0.0}
+    for x, y in held_out:
+        errors["file"] += float(((_stepped(blend, x, keys, values, z) - y) ** 2).sum())
+        errors["ridge"] += float(((ridge.predict(x) - y) ** 2).sum())
+        errors["cchp"] += float(((_stepped(inner, x, inner_keys, inner_values, inner_z) - y) ** 2).sum())
+    assert float(blend.blend_of(keys)) > 0.8
+    assert errors["file"] <= 1.2 * errors["ridge"] and errors["file"] < 0.5 * errors["cchp"]
+
+
+def test_the_shipped_default_is_the_core_cchp_with_the_ridge_read(tmp_path):
+    """models/cchp_default.pt is `ridge_blend_policy` applied to models/cchp_core.pt with its defaults,
+    and encodes and steps as today's builder writes it."""
+    from rtcohand_drake.learning.export import read_model_card
+
+    card = read_model_card(MODELS / "cchp_default.pt")
+    assert card["ridge_read"] == {"inner_policy": "cchp_core.pt", "window": rbp.DEFAULT_WINDOW,
+                                  "lambda": rbp.DEFAULT_LAMBDA, "blend_folds": rbp.DEFAULT_FOLDS,
+                                  "blend_rows": rbp.DEFAULT_ROWS, "read": card["ridge_read"]["read"]}
+    shipped = load_policy(MODELS / "cchp_default.pt")
+    rebuilt = load_policy(rbp.build_ridge_blend_policy(CORE, tmp_path / "rebuilt.pt"))
+    rng = np.random.default_rng(2)
+    pieces = _linear_person(rng, n_clips=6, steps=20)
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+    encoded = [m.encode_context(x_c, y_c, mask) for m in (shipped, rebuilt)]
+    for a, b in zip(*encoded):
+        assert torch.equal(a, b)
+    target = pieces[0][0]
+    np.testing.assert_array_equal(_stepped(shipped, target, *encoded[0][:3]), _stepped(rebuilt, target, *encoded[1][:3]))
+
+
+def test_building_on_a_blended_file_or_bad_settings_is_one_line(tmp_path):
+    cli = [sys.executable, "-m", "rtcohand_drake.learning.ridge_blend_policy"]
+    for args in (["--policy", str(MODELS / "cchp_default.pt")], ["--policy", str(CORE), "--lambda", "0"],
+                 ["--policy", str(tmp_path / "none.pt")]):
+        run = subprocess.run(cli + args + ["--out", str(tmp_path / "x.pt")], capture_output=True, text=True)
+        assert run.returncode == 2, run.stderr
+        assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
