@@ -1,7 +1,8 @@
 """The study of recorded people in the closed loop (`python -m rtcohand_drake.study --recorded-people PEOPLE.h5`).
 
     python -m rtcohand_drake.study --recorded-people PEOPLE.h5 --out DIR [--people s03 s07 ...]
-        [--conditions responsive intent] [--run-seeds 0] [--cap S] [--model PATH.pt] [--workers 2 | --address ...]
+        [--conditions responsive intent] [--run-seeds 0] [--cap S] [--model PATH.pt] [--no-hand-sign]
+        [--workers 2 | --address ...]
 
 Each person of the gesture dataset file (the importer's: held-out `split =
 test` repetitions, `split = train` context) runs the inspection with the
@@ -24,7 +25,11 @@ the two it touched), `limits_exceeded` (which limits the run went beyond:
 `analysis.inspection.limits_exceeded`), `wrong_way_share` and `drift_share`
 (`analysis.gesture_following`), or None for a run that failed with an error
 (a person with no held-out recording of a motion the inspection asked for).
-`DIR/study.md` gives the table per person and the medians.
+`DIR/study.md` gives the table per person and the medians, and counts the
+pauses the pause hand sign made (`sign_pauses`): neither the simulated nor
+the recorded person means one, but some recorded gestures start or end in a
+thumbs-up held still. `--no-hand-sign` runs a copy of the scenario with the
+sign off.
 """
 
 from __future__ import annotations
@@ -44,25 +49,28 @@ def log_name(person: str, condition: str, seed: int) -> str:
     return f"{person}_{condition}_s{seed}.h5"
 
 
-def _scenario_path(folder: str, cap_s: float | None) -> str:
-    """The inspection scenario, or a copy of it with its cap changed."""
+def _scenario_path(folder: str, cap_s: float | None, hand_sign: bool = True) -> str:
+    """The inspection scenario, or a copy of it with its cap changed or its pause hand sign off."""
     import yaml
 
     from rtcohand_drake.scenario import resolve_scenario_path
 
-    if cap_s is None:
+    if cap_s is None and hand_sign:
         return "inspection"
     data = yaml.safe_load(resolve_scenario_path("inspection").read_text())
-    data["duration_s"] = float(cap_s)
+    if cap_s is not None:
+        data["duration_s"] = float(cap_s)
+    if not hand_sign:
+        data.setdefault("hand_sign", {})["enabled"] = False
     path = Path(folder) / "inspection_capped.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return str(path)
 
 
 def run_recorded_condition(people_file: str, person: str, condition: str, out: str, seed: int = 0,
-                           cap_s: float | None = None, model: str | None = None) -> dict:
+                           cap_s: float | None = None, model: str | None = None, hand_sign: bool = True) -> dict:
     """One run of `person` in `condition`, its log written to `out`; returns its entry (module doc).
-    Raises on a run that fails."""
+    `hand_sign=False` runs with the scenario's pause hand sign off. Raises on a run that fails."""
     import contextlib
     import io
     import tempfile
@@ -73,7 +81,7 @@ def run_recorded_condition(people_file: str, person: str, condition: str, out: s
     log = Path(out) / log_name(person, condition, seed)
     log.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as folder:
-        scenario_path = _scenario_path(folder, cap_s)
+        scenario_path = _scenario_path(folder, cap_s, hand_sign)
         if condition == "intent":
             from rtcohand_drake.analysis.reference_policies import run_intent_with_source
             from rtcohand_drake.cell.plant import eye_position
@@ -214,7 +222,8 @@ def main_recorded(args) -> int:
         return f"{person} {c} run seed {seed}: {state} ({o.seconds:.0f} s wall)"
 
     report = run_tasks(run_recorded_condition,
-                       [(k, (str(path), k[0], k[1], str(logs), k[2], args.cap, model)) for k in keys],
+                       [(k, (str(path), k[0], k[1], str(logs), k[2], args.cap, model, not args.no_hand_sign))
+                        for k in keys],
                        workers=args.workers, address=args.address, label="recorded study", describe=describe,
                        runs_per_worker=args.runs_per_worker)
     results: dict = {p: {c: {} for c in conditions} for p in people}
@@ -226,12 +235,13 @@ def main_recorded(args) -> int:
             failed.append({"person": person, "condition": c, "run_seed": seed, "attempts": o.attempts,
                            "error": o.error})
     header = (f"Recorded people of `{path}`; policy file: {args.model or 'the scenario default'}; run seeds "
-              f"{', '.join(map(str, seeds))}.")
+              f"{', '.join(map(str, seeds))}; the pause hand sign {'off' if args.no_hand_sign else 'on'}.")
     text, medians = markdown(results, conditions, cap, failed, header)
     text += "\n" + engine_summary(report) + "\n"
     print(text)
     (args.out / "study.md").write_text(text)
     summary = {"recorded_people": str(path), "people": people, "run_seeds": seeds, "cap_s": cap,
+               "hand_sign": not args.no_hand_sign,
                "conditions": conditions, "model": model,
                "results": {p: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}
                            for p, by_c in results.items()},

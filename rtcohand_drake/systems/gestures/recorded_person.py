@@ -19,9 +19,11 @@ person's own recordings from a gesture dataset file (docs/interfaces.md,
   a recording that ends is followed by the next; when the person sees the
   part arrive, the recording is cut there and the hand stays where it is.
 - **Continuity.** Each recording is moved so that its palm centre starts
-  where the hand's is, and the hand takes the recording's first shape over
-  `RecordedHandConfig.join_s` before it plays (label zero meanwhile): the
-  skeleton never jumps.
+  where the hand's is, and the hand takes the recording's first shape before
+  it plays (label zero meanwhile): the wrist on a straight line, each bone
+  turning on the great circle, over 0.4 s or longer where a point would move
+  faster than 0.25 m/s or a bone turn faster than 3 rad/s
+  (`RecordedHandConfig`). The skeleton never jumps.
 - **At rest** the hand holds still, with the person's own tracking noise:
   each frame's offset from the centred median of its 5 frames, from their
   held-out recordings' rest frames (label zero) where those move; where they
@@ -59,6 +61,39 @@ MOTIONS = tuple((d, s) for d in range(6) for s in (1, -1))
 PALM = (0, 5, 9, 13, 17)  # wrist and the four finger bases: the palm centre is their mean
 
 
+# Each keypoint's parent along the hand's chains (the wrist is the root): thumb 1-4, index 5-8, ...
+PARENT = (-1, 0, 1, 2, 3, 0, 5, 6, 7, 0, 9, 10, 11, 0, 13, 14, 15, 0, 17, 18, 19)
+
+
+def blend_hands(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
+    """(21, 3) the hand a share `w` of the way from skeleton `a` to skeleton `b`: the wrist moves on
+    the straight line, each bone turns on the great circle and changes its length linearly. (A
+    straight-line blend of the points can pass a bone through zero length, so that its direction
+    flips within a frame.)"""
+    out = np.empty((21, 3))
+    out[0] = (1.0 - w) * a[0] + w * b[0]
+    for k in range(1, 21):
+        p = PARENT[k]
+        u, v = a[k] - a[p], b[k] - b[p]
+        lu, lv = np.linalg.norm(u), np.linalg.norm(v)
+        if lu < 1e-9 or lv < 1e-9:
+            out[k] = out[p] + (1.0 - w) * u + w * v
+            continue
+        u, v = u / lu, v / lv
+        angle = float(np.arccos(np.clip(u @ v, -1.0, 1.0)))
+        if angle < 1e-9:
+            direction = u
+        else:
+            axis = np.cross(u, v)
+            if np.linalg.norm(axis) < 1e-9:  # opposite: turn about any axis across the bone
+                axis = np.cross(u, np.eye(3)[int(np.argmin(np.abs(u)))])
+            axis = axis / np.linalg.norm(axis)
+            turn = w * angle  # Rodrigues' rotation of u about the axis
+            direction = u * np.cos(turn) + np.cross(axis, u) * np.sin(turn) + axis * (axis @ u) * (1 - np.cos(turn))
+        out[k] = out[p] + ((1.0 - w) * lu + w * lv) * direction
+    return out
+
+
 def motion_name(motion: tuple[int, int]) -> str:
     return f"{DIMENSIONS[motion[0]]}{'+' if motion[1] > 0 else '-'}"
 
@@ -67,7 +102,12 @@ def motion_name(motion: tuple[int, int]) -> str:
 class RecordedHandConfig:
     """How the recorded hand joins its recordings and holds still."""
 
-    join_s: float = 0.4  # the hand takes a recording's first shape over this long before it plays
+    # The hand takes a recording's first shape over at least `join_s` before it plays, longer when
+    # a point of the hand has further to go than `join_speed_m_s` covers in that time, or a bone
+    # further to turn than `join_turn_rad_s` does.
+    join_s: float = 0.4
+    join_speed_m_s: float = 0.25
+    join_turn_rad_s: float = 3.0
     noise_window: int = 5  # tracking noise: each frame's offset from the median of this many frames
     still_m: float = 1e-6  # rest frames whose noise is all below this are held still by the file ...
     still_speed_m_s: float = 0.05  # ... and the noise is taken where the palm moves slower than this
@@ -174,6 +214,7 @@ class RecordedHandState(PersonState):
     frame: int = 0  # the next frame of it to play
     offset: np.ndarray = dc.field(default_factory=lambda: np.zeros(3))  # added to the recording, m
     join_from: np.ndarray = dc.field(default_factory=lambda: np.zeros((21, 3)))
+    join_s: float = 0.0  # how long this join takes
     held: np.ndarray | None = None  # (21, 3) the still hand at rest
     noise_at: int = 0
 
@@ -214,7 +255,19 @@ class RecordedPerson(InspectingPerson):
         s.join_from = s.keypoints.copy()
         first = self._recording(s).keypoints[0]
         s.offset = s.join_from[list(PALM)].mean(axis=0) - first[list(PALM)].mean(axis=0)
+        s.join_s = max(self.hand.join_s, self._join_time(s.join_from, first + s.offset))
         s.hand, s.hand_since, s.frame = "join", t, 0
+
+    def _join_time(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Seconds for the hand to go from skeleton a to b at the join's speed and turn rate."""
+        bones_a = a[1:] - a[list(PARENT[1:])]
+        bones_b = b[1:] - b[list(PARENT[1:])]
+        cos = np.sum(bones_a * bones_b, axis=1) / np.maximum(
+            np.linalg.norm(bones_a, axis=1) * np.linalg.norm(bones_b, axis=1), 1e-12)
+        turn = float(np.nanmax(np.arccos(np.clip(cos, -1.0, 1.0))))
+        distance = float(np.nanmax(np.linalg.norm(b - a, axis=1)))
+        time = max(distance / self.hand.join_speed_m_s, turn / self.hand.join_turn_rad_s)
+        return time if np.isfinite(time) else 0.0
 
     def _to_rest(self, s: RecordedHandState, t: float) -> None:
         s.hand, s.held, s.stroke = "rest", s.keypoints.copy(), None
@@ -237,12 +290,15 @@ class RecordedPerson(InspectingPerson):
                 s.noise_at += 1
                 return
         if s.hand == "join":
-            u = (t - s.hand_since) / self.hand.join_s if self.hand.join_s > 0 else 1.0
+            u = (t - s.hand_since) / s.join_s if s.join_s > 0 else 1.0
             target = self._recording(s).keypoints[0] + s.offset
             if u < 1.0 - 1e-9:
                 w = smoothstep(u)
-                s.keypoints = (1.0 - w) * s.join_from + w * target
+                s.keypoints = blend_hands(s.join_from, target, w)
                 return
+            late = s.hand_since + s.join_s - s.stroke.t_on[0]
+            if s.stroke.t_on[0] >= s.hand_since - 1e-9 and late > 0:  # a first join longer than planned
+                s.stroke.t_on, s.stroke.t_plan_end = s.stroke.t_on + late, s.stroke.t_plan_end + late
             s.hand = "stroke"
         st = s.stroke
         self._stop_rule(s, t)
