@@ -225,3 +225,25 @@ def test_workpiece_twist_in_the_user_frame():
     mid, twist = workpiece_twist_U(t, np.asarray(poses), R_WU)
     assert np.allclose(mid, t[:-1] + 0.01)
     assert np.allclose(twist, np.r_[v_U, w_U], atol=1e-9)
+
+
+def test_study_of_recorded_people_writes_each_run_with_its_shares(people, tmp_path):
+    import json
+
+    from rtcohand_drake.analysis import study
+
+    out = tmp_path / "study"
+    status = study.main(["--recorded-people", str(people), "--people", "p1", "p2", "--cap", "6", "--workers", "0",
+                         "--out", str(out)])
+    assert status == 1  # p2 has no held-out Tz+, which the lift asks for at once
+    data = json.loads((out / "study.json").read_text())
+    assert data["conditions"] == ["responsive", "intent"]
+    for condition in ("responsive", "intent"):
+        run = data["results"]["p1"][condition]["0"]
+        assert run["completed"] is False and run["faces"] < 6  # capped at 6 s
+        assert run["contacts"] == 0 and run["limits_exceeded"] == []
+        assert 0.0 <= run["wrong_way_share"] <= 1.0 and 0.0 <= run["drift_share"] <= 1.0
+        assert data["results"]["p2"][condition]["0"] is None
+    assert sorted(p.name for p in (out / "logs").glob("p1_*.h5")) == ["p1_intent_s0.h5", "p1_responsive_s0.h5"]
+    text = (out / "study.md").read_text()
+    assert "no held-out recording (split test) of Tz+" in text and "| p1 | intent | 0 |" in text
