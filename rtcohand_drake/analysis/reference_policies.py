@@ -10,13 +10,13 @@ from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, INTENDED_T
 
 
 class IntentPolicy(LeafSystem):
-    """A reference in place of the CCHP policy: the simulated person's intended twist, delayed.
+    """A reference in place of the CCHP policy: the simulated (or recorded) person's intended twist, delayed.
 
     Not a policy anyone can deploy (a real person's intent is not observable):
     it measures what the rest of the loop (filter, supervisor, IK, arm) achieves
     with a policy that reads every gesture right, `delay_s` late. Same ports as
     `CchpPolicy` plus the input `intended_twist`, which the run diagram wires to
-    the simulated person's output of that name.
+    the source's output of that name (a recorded person's: the label of the frame it plays).
     """
 
     def __init__(self, rate_hz: float = 10.0, delay_s: float = 0.3):
