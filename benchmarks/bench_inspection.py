@@ -37,22 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from rtcohand_drake.analysis.engine import run_tasks
+from rtcohand_drake.analysis.inspection import joint_excess
 from rtcohand_drake.analysis.study import engine_summary
 from rtcohand_drake.diagram import peak_speeds
 from rtcohand_drake.run_log import read_run_log
 from rtcohand_drake.scenario import load_scenario
-from rtcohand_drake.cell.plant import make_control_plant
-
-
-def joint_excess(scenario, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
-    """Largest excursion beyond the joint position limits (rad) and speed limits (rad/s); <= 0: within."""
-    plant, _ = make_control_plant(scenario.cell)
-    lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
-    vmax = plant.GetVelocityUpperLimits()
-    with np.errstate(invalid="ignore"):
-        over_q = np.nanmax(np.maximum(q - hi, lo - q)) if len(q) else -np.inf
-        over_v = np.nanmax(np.abs(v) - vmax) if len(v) else -np.inf
-    return float(over_q), float(over_v)
 
 
 def run_user(user: str, args, out: Path) -> tuple[str, int, str]:

@@ -134,6 +134,8 @@ def build_run_diagram(scenario: Scenario, source: LeafSystem | None = None, poli
         loggers["hand_sign"] = log(hand_sign.GetOutputPort(HAND_SIGN), scenario.hand_sign.period_s)
     loggers["gesture_status"] = log(source.GetOutputPort(GESTURE_STATUS), policy_period)
     loggers["gesture_keypoints"] = log(keypoints, policy_period)
+    if source.HasOutputPort(INTENDED_TWIST):  # a simulated or recorded person: what they mean
+        loggers["gesture_intended"] = log(source.GetOutputPort(INTENDED_TWIST), policy_period)
     if policy is not None:
         loggers["policy_mean"] = log(policy.GetOutputPort(POLICY_MEAN), policy_period)
         loggers["policy_std"] = log(policy.GetOutputPort(POLICY_STD), policy_period)
@@ -211,9 +213,12 @@ def collect_run_log(run: RunDiagram, root_context: Context, scenario: Scenario) 
         log.policy_mean, log.policy_std = policy[:2]
         if len(policy) > 2:
             log.policy_read_variance = policy[2][:, 0]
-    log.gesture_time, (status, log.gesture_keypoints) = _log_group(
-        run, root_context, ("gesture_status", "gesture_keypoints"))
+    names = ("gesture_status", "gesture_keypoints") + (("gesture_intended",) if "gesture_intended" in run.loggers else ())
+    log.gesture_time, gesture = _log_group(run, root_context, names)
+    status, log.gesture_keypoints = gesture[:2]
     log.gesture_valid, log.gesture_frame_time = status[:, 0], status[:, 1]
+    if len(gesture) > 2:
+        log.gesture_intended = gesture[2]
 
     t, status = _log_arrays(run.loggers["safety_status"], root_context)
     modes = status[:, 0].round().astype(int)

@@ -2,8 +2,8 @@
 
     python -m rtcohand_drake.run [--scenario NAME | PATH.yaml]   # default: the built-in inspection
         [--duration S] [--realtime-rate R] [--no-meshcat] [--no-wait] [--seed N]
-        [--gesture-source synthetic|replay|camera|scripted|joystick]
-        [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]
+        [--gesture-source synthetic|replay|recorded|camera|scripted|joystick]
+        [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]   # recorded: --clip PERSON
         [--camera N | --video PATH] [--camera-calibration FILE]   # with --gesture-source camera
         [--context-file PATH.h5 [PATH.h5 ...] [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
@@ -57,7 +57,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="; ".join(f"{name}: {entry.summary}" for name, entry in GESTURE_SOURCES.items())
                    + " (default: replay with --gesture-file, else synthetic)")
     p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (docs/interfaces.md, the gesture dataset file)")
-    p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order)")
+    p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order); "
+                   "with --gesture-source recorded: the person")
     p.add_argument("--camera", type=int, default=None, help="camera source: the OpenCV camera number")
     p.add_argument("--video", type=Path, default=None,
                    help="camera source: a video file, played in simulated time at its own frame rate")
@@ -102,8 +103,10 @@ def _check_args(args) -> None:
                                else "synthetic")
     if args.gesture_source == "replay" and args.gesture_file is None:
         raise InputError("command line: --gesture-source replay needs --gesture-file PATH.h5")
-    if args.gesture_source != "replay" and (args.gesture_file is not None or args.clip is not None):
-        raise InputError("command line: --gesture-file and --clip go with --gesture-source replay")
+    if args.gesture_source == "recorded" and (args.gesture_file is None or args.clip is None):
+        raise InputError("command line: --gesture-source recorded needs --gesture-file PEOPLE.h5 --clip PERSON")
+    if args.gesture_source not in ("replay", "recorded") and (args.gesture_file is not None or args.clip is not None):
+        raise InputError("command line: --gesture-file and --clip go with --gesture-source replay or recorded")
     if args.gesture_source == "camera" and (args.camera is None) == (args.video is None):
         raise InputError("command line: --gesture-source camera needs exactly one of --camera N and --video PATH")
     if args.gesture_source != "camera" and camera_flags:

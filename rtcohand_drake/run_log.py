@@ -10,6 +10,7 @@ Layout (docs/interfaces.md (the run log); extensions are marked +):
   /command/time (M,) /command/twist (M,6) + /command/speed_scale (M,)
   /robot/time (K,) /robot/q (K,7) /robot/v (K,7) /robot/workpiece_pose (K,7)
   + /gesture/time (G,) + /gesture/valid (G,) + /gesture/frame_time (G,) + /gesture/keypoints (G,63)
+  + /gesture/intended (G,6) (a simulated or recorded person's intended twist; (0, 6) for other sources)
   /events  compound (time f8, kind str, detail str)
   / attrs: scenario, model, gesture_source, completed, faces_inspected,
            completion_time, + format = "rtcohand-runlog", + version = 1
@@ -64,6 +65,9 @@ class RunLog:
     gesture_valid: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     gesture_frame_time: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
     gesture_keypoints: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 63)))
+    # The twist a simulated or recorded person means at each of those samples (m/s, rad/s, U; a
+    # recorded person's: the label of the frame played); empty for a source without one.
+    gesture_intended: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 6)))
     events: list[Event] = dc.field(default_factory=list)
     extra_attrs: dict = dc.field(default_factory=dict)
 
@@ -79,6 +83,7 @@ _DATASETS = {
     "robot/workpiece_pose": "robot_workpiece_pose",
     "gesture/time": "gesture_time", "gesture/valid": "gesture_valid",
     "gesture/frame_time": "gesture_frame_time", "gesture/keypoints": "gesture_keypoints",
+    "gesture/intended": "gesture_intended",
 }
 _EVENT_DTYPE = np.dtype([("time", "f8"), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
 

@@ -175,3 +175,36 @@ def score_run_log(log, scenario) -> tuple[float, float]:
         log.add_event(cell_t, "cell_contact", f"{pair} touched ({cell * 1e3:.1f} mm)")
     log.events.sort(key=lambda e: e.time)
     return clearance, clearance_t
+
+
+def joint_excess(scenario, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """Largest excursion beyond the joint position limits (rad) and speed limits (rad/s); <= 0: within."""
+    from rtcohand_drake.cell.plant import make_control_plant
+
+    plant, _ = make_control_plant(scenario.cell)
+    lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    vmax = plant.GetVelocityUpperLimits()
+    with np.errstate(invalid="ignore"):
+        over_q = np.nanmax(np.maximum(q - hi, lo - q)) if len(q) else -np.inf
+        over_v = np.nanmax(np.abs(v) - vmax) if len(v) else -np.inf
+    return float(over_q), float(over_v)
+
+
+def limits_exceeded(scenario, log, tolerance: float = 0.02) -> list[str]:
+    """The limits a run log went beyond: the workpiece's peak linear and angular speed over the
+    safety layer's limits (by more than `tolerance` of them), joint positions or speeds over the
+    arm's; empty when within every one."""
+    from rtcohand_drake.diagram import peak_speeds
+
+    v_peak, w_peak = peak_speeds(log.robot_time, log.robot_workpiece_pose)
+    over_q, over_v = joint_excess(scenario, log.robot_q, log.robot_v)
+    hit = []
+    if v_peak > scenario.safety.max_linear_speed_m_s * (1.0 + tolerance):
+        hit.append(f"workpiece speed {v_peak:.3f} m/s")
+    if w_peak > scenario.safety.max_angular_speed_rad_s * (1.0 + tolerance):
+        hit.append(f"workpiece turn rate {w_peak:.3f} rad/s")
+    if over_q > 0:
+        hit.append(f"joint position {over_q:.3f} rad over")
+    if over_v > 0:
+        hit.append(f"joint speed {over_v:.3f} rad/s over")
+    return hit

@@ -10,13 +10,13 @@ from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, INTENDED_T
 
 
 class IntentPolicy(LeafSystem):
-    """A reference in place of the CCHP policy: the simulated person's intended twist, delayed.
+    """A reference in place of the CCHP policy: the simulated (or recorded) person's intended twist, delayed.
 
     Not a policy anyone can deploy (a real person's intent is not observable):
     it measures what the rest of the loop (filter, supervisor, IK, arm) achieves
     with a policy that reads every gesture right, `delay_s` late. Same ports as
     `CchpPolicy` plus the input `intended_twist`, which the run diagram wires to
-    the simulated person's output of that name.
+    the source's output of that name (a recorded person's: the label of the frame it plays).
     """
 
     def __init__(self, rate_hz: float = 10.0, delay_s: float = 0.3):
@@ -46,16 +46,25 @@ def run_intent_reference(scenario, user: str, *, seed: int = 0, population_seed:
     of population `population_seed`: the scored run log (`diagram.collect_run_log`). It runs for
     `duration_s` (default: the scenario's cap), or, with `stop_when_done`, until the scenario's hold
     after the sixth face, as the run command does."""
+    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
+
+    source, _ = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed)
+    return run_intent_with_source(scenario, source, seed=seed, delay_s=delay_s, duration_s=duration_s,
+                                  stop_when_done=stop_when_done)
+
+
+def run_intent_with_source(scenario, source, *, seed: int = 0, delay_s: float = 0.3, duration_s: float | None = None,
+                           stop_when_done: bool = False, gesture_source: str = "intent"):
+    """`run_intent_reference` for any source with an `intended_twist` output (a simulated or
+    recorded person): the scored run log."""
     from pydrake.systems.analysis import Simulator
 
     from rtcohand_drake.analysis.inspection import score_run_log
     from rtcohand_drake.diagram import build_run_diagram, collect_run_log
-    from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
     from rtcohand_drake.systems.inspection_monitor import until_done
 
-    source, _ = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed)
     run = build_run_diagram(scenario, source=source, policy=IntentPolicy(scenario.policy.rate_hz, delay_s),
-                            gesture_source="intent")
+                            gesture_source=gesture_source)
     simulator = Simulator(run.diagram)
     if stop_when_done:
         simulator.set_monitor(until_done(run.monitor, scenario.done_hold_s))

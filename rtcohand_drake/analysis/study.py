@@ -2,6 +2,7 @@
 
     python -m rtcohand_drake.study [--populations 100-119] [--run-seeds 0 1] [--workers 2 | --address tcp://HOST:8786]
         [--conditions responsive paper joystick intent] [--cap 180] [--out docs/results/study] [--logs DIR]
+    python -m rtcohand_drake.study --recorded-people PEOPLE.h5 --out DIR [--people ...]   # analysis.recorded_study
 
 For each out-sample person (u10-u14) of each generated population and each
 run seed, the inspection task is run to its end (all six faces plus the
@@ -252,7 +253,14 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--populations", type=_int_list, nargs="+", default=[[100], [101], [102]],
                    help="population seeds, or ranges such as 100-119 (five out-sample people each)")
     p.add_argument("--users", nargs="+", default=list(OUT_SAMPLE))
-    p.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(CONDITIONS))
+    p.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=None,
+                   help="default: all four; with --recorded-people: responsive intent")
+    p.add_argument("--recorded-people", type=Path, default=None,
+                   help="a gesture dataset file of recorded people: run them with the recorded gesture source "
+                        "(analysis.recorded_study) instead of the generated populations")
+    p.add_argument("--people", nargs="+", default=None, help="with --recorded-people: these people (default: all)")
+    p.add_argument("--no-hand-sign", action="store_true",
+                   help="with --recorded-people: run a copy of the scenario with the pause hand sign off")
     p.add_argument("--run-seeds", type=int, nargs="+", default=None,
                    help="the runs' --seed (the people's decision rhythm), each person runs each (default: 0)")
     p.add_argument("--seed", type=int, default=None, help="one run seed (the same as --run-seeds N)")
@@ -282,6 +290,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error("--runs-per-worker must be 0 (never restart) or more")
     if args.model is not None and not args.model.is_file():
         p.error(f"--model {args.model}: no such file")
+    if args.recorded_people is not None:
+        from rtcohand_drake.analysis.recorded_study import main_recorded
+
+        return main_recorded(args)
+    if args.people is not None or args.no_hand_sign:
+        p.error("--people and --no-hand-sign go with --recorded-people")
+    args.conditions = args.conditions or list(CONDITIONS)
     model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
     from rtcohand_drake.repo_paths import repo_relative

@@ -42,6 +42,9 @@ GESTURE_SOURCES: dict[str, GestureSourceEntry] = {
                                     "the built-in simulated person, in closed loop (--user, --population-seed)"),
     "replay": GestureSourceEntry("rtcohand_drake.systems.gestures.replay",
                                  "clips of a dataset file, back to back (--gesture-file, --clip)"),
+    "recorded": GestureSourceEntry("rtcohand_drake.systems.gestures.recorded_person",
+                                   "the simulated person's decisions with a recorded person's own held-out "
+                                   "gestures, in closed loop (--gesture-file, --clip PERSON)"),
     "camera": GestureSourceEntry("rtcohand_drake.systems.gestures.camera", "a live hand tracker"),
     "scripted": GestureSourceEntry("rtcohand_drake.systems.scripted_twist",
                                    "the scenario's scripted_motion, straight to the supervisor (no policy)",

@@ -220,44 +220,45 @@ def _copy_with_arrays(obj):
     return new
 
 
-class SimulatedPerson(KeypointGestureSource):
-    """A simulated person who moves and turns the workpiece with one user's gestures (see module doc)."""
+class InspectingPerson(KeypointGestureSource):
+    """The person's eyes and decisions (see module doc); the hand is the subclass's `_move_hand`.
 
-    def __init__(self, user: UserProfile, X_WU, eye_W, config: PersonConfig | None = None,
-                 generator: GeneratorConfig | None = None, rate_hz: float = 10.0, seed: int = 0,
-                 population_seed: int | None = None):
+    Each policy period the person sees the part (`_perceive`) and moves the hand
+    (`_move_hand(s, t)`, which sets `s.keypoints` and `s.intended` and asks
+    `_decide` for the next stroke when it is free). `SimulatedPerson` makes the
+    gestures from a user's population model; `recorded_person.RecordedPerson`
+    plays a recorded person's own gestures.
+    """
+
+    def __init__(self, person_id: str, X_WU, eye_W, config: PersonConfig | None = None, rate_hz: float = 10.0,
+                 seed: int = 0, population_seed: int | None = None, state_type: type = PersonState,
+                 **initial_fields):
         super().__init__(rate_hz)
-        self.user = user
         self.config = config or PersonConfig()
-        self.generator = generator or GeneratorConfig()
-        if self.config.return_mode not in ("out_of_view", "in_view"):
-            raise ValueError(f"return_mode must be 'out_of_view' or 'in_view', got {self.config.return_mode!r}")
         self._R_UW = X_WU.rotation().matrix().T
         self._p_WU = X_WU.translation().copy()
         self.eye_U = self._to_U(np.asarray(eye_W, float))
         # None: where the lift ends, known once the part is first seen (`_presentation_U`).
         self.presentation_U = (None if self.config.presentation_xyz_W is None
                                else self._to_U(np.asarray(self.config.presentation_xyz_W, float)))
-        self._R_rest = rest_rotation(user)
-        self._relaxed = relaxed_curl(user)
 
         # Deterministic in (seed, person): the person's own randomness (perception delay, tremor,
         # decision rhythm), apart from the dataset's. A person is a user id of a population: the
         # population's seed joins the key, so that u10 of population 101 is not u10 of 102 at the
         # joystick or as the intent reference either. The benchmark population (DEFAULT_SEED, or
         # None) keeps the key without it, so its runs are unchanged.
-        key = [int(seed), 7351, *(ord(c) for c in user.user_id)]
+        key = [int(seed), 7351, *(ord(c) for c in person_id)]
         if population_seed is not None and int(population_seed) != DEFAULT_SEED:
             key += [8191, int(population_seed)]
         rng = np.random.default_rng(key)
-        initial = PersonState(
+        initial = state_type(
             rng=rng,
             delay_s=float(rng.uniform(*self.config.perception_delay_s)),
             tremor_phase=rng.uniform(0, 2 * np.pi, size=(2, 3)),
             wander_freq_hz=rng.uniform(0.2, 0.5, 3),
             wander_phase=rng.uniform(0, 6.3, 3),
+            **initial_fields,
         )
-        initial.curl = self._relaxed.copy()
         self._pose = self.DeclareVectorInputPort(WORKPIECE_POSE, POSE_DIM)
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         # Unrestricted updates run before the base class's discrete update at the same
@@ -265,6 +266,13 @@ class SimulatedPerson(KeypointGestureSource):
         self.DeclarePeriodicUnrestrictedUpdateEvent(self.period_s, 0.0, self._advance)
         self.DeclareVectorOutputPort(INTENDED_TWIST, TWIST_DIM, self._calc_intended,
                                      prerequisites_of_calc={self.abstract_state_ticket(self._state)})
+
+    def _move_hand(self, s: PersonState, t: float) -> None:
+        raise NotImplementedError
+
+    def _stroke_speeds(self, intensity: float, total_s: float) -> tuple[float, float]:
+        """The hand's speed (m/s) and turn rate (rad/s) for a stroke; 0 where the hand does not use them."""
+        return 0.0, 0.0
 
     # ------------------------------------------------------------------ Drake plumbing
 
@@ -430,7 +438,7 @@ class SimulatedPerson(KeypointGestureSource):
 
     def _plan(self, s: PersonState, t: float, motions, goal: str, target: np.ndarray, face: int,
               error: float, linear: bool) -> _Stroke:
-        cfg, g, rng = self.config, self.generator, s.rng
+        cfg, rng = self.config, s.rng
         full = cfg.full_error_m if linear else np.deg2rad(cfg.full_error_deg)
         size = error if linear else np.deg2rad(error)
         lo, hi = cfg.intensity_range
@@ -441,8 +449,7 @@ class SimulatedPerson(KeypointGestureSource):
         k = len(motions)
         t_on = t + np.array([0.0] + [float(rng.uniform(0.0, cfg.second_onset_jitter_s)) for _ in range(k - 1)])
         total = hold + 0.5 * (up + down)  # seconds of full activation, as the clips pace it
-        speed = min(self.user.speed_m_s * intensity, 0.85 * g.max_excursion_m / total)
-        rate = min(self.user.rate_rad_s * intensity, 0.85 * g.max_turn_rad / total)
+        speed, rate = self._stroke_speeds(intensity, total)
         s.strokes += 1
         return _Stroke(
             motions=tuple(motions), goal=goal, target=np.asarray(target, float).copy(), face=face,
@@ -477,6 +484,26 @@ class SimulatedPerson(KeypointGestureSource):
                 arrived = remaining <= max(sign * v[dim], 0.0) * cfg.anticipation_s + 0.5 * tol
             if arrived or t >= st.t_plan_end[k]:
                 st.t_off[k] = t
+
+class SimulatedPerson(InspectingPerson):
+    """A simulated person who moves and turns the workpiece with one user's gestures (see module doc)."""
+
+    def __init__(self, user: UserProfile, X_WU, eye_W, config: PersonConfig | None = None,
+                 generator: GeneratorConfig | None = None, rate_hz: float = 10.0, seed: int = 0,
+                 population_seed: int | None = None):
+        relaxed = relaxed_curl(user)
+        super().__init__(user.user_id, X_WU, eye_W, config, rate_hz, seed, population_seed, curl=relaxed.copy())
+        self.user = user
+        self.generator = generator or GeneratorConfig()
+        if self.config.return_mode not in ("out_of_view", "in_view"):
+            raise ValueError(f"return_mode must be 'out_of_view' or 'in_view', got {self.config.return_mode!r}")
+        self._R_rest = rest_rotation(user)
+        self._relaxed = relaxed
+
+    def _stroke_speeds(self, intensity: float, total_s: float) -> tuple[float, float]:
+        g = self.generator
+        return (min(self.user.speed_m_s * intensity, 0.85 * g.max_excursion_m / total_s),
+                min(self.user.rate_rad_s * intensity, 0.85 * g.max_turn_rad / total_s))
 
     # ------------------------------------------------------------------ the hand
 
