@@ -244,8 +244,7 @@ def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_
 
 
 def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
-    """models/cchp_path_shape.pt is `path_shape_policy` applied to models/cchp_core.pt (the CCHP inside the
-    default file) with its defaults."""
+    """models/cchp_path_shape.pt is `path_shape_policy` applied to models/cchp_default.pt with its defaults."""
     import pathlib
 
     from rtcohand_drake.learning import path_shape_policy as psp
@@ -254,12 +253,12 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     models = pathlib.Path(__file__).resolve().parents[1] / "models"
     card = read_model_card(models / "cchp_path_shape.pt")
     assert card["path_shape_read"] == {
-        "inner_policy": "cchp_core.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
+        "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
         "features": card["path_shape_read"]["features"]}
-    wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_core.pt")
+    wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
@@ -276,12 +275,12 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
 
 
 def test_the_shipped_path_shape_file_is_what_the_builder_writes_today(tmp_path):
-    """Rebuilt from models/cchp_core.pt by today's code, the file encodes and steps as the shipped one."""
+    """Rebuilt from models/cchp_default.pt by today's code, the file encodes and steps as the shipped one."""
     import pathlib
 
     models = pathlib.Path(__file__).resolve().parents[1] / "models"
     shipped = load_policy(models / "cchp_path_shape.pt")
-    rebuilt = load_policy(build_path_shape_policy(models / "cchp_core.pt", tmp_path / "rebuilt.pt"))
+    rebuilt = load_policy(build_path_shape_policy(models / "cchp_default.pt", tmp_path / "rebuilt.pt"))
     rng = np.random.default_rng(6)
     context, (target, _) = _pieces(rng, [25, 18, 20, 16, 22]), _pieces(rng, [6])[0]
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
