@@ -125,6 +125,8 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool) 
     f, y, kq = stream
     out = read(f, kq)
     result = {"clip_by_clip": err_single / zero_single, "back_to_back": float(((out - y) ** 2).sum() / (y ** 2).sum()),
+              "clip_by_clip_error": err_single, "clip_by_clip_zero": zero_single,
+              "back_to_back_error": float(((out - y) ** 2).sum()), "back_to_back_zero": float((y ** 2).sum()),
               "release_on": bool(gate.on), "release_harm": float(gate.harm)}
     result.update(motion_shares(out, y, rate_hz))
     result["rest_share"] = result["rest_moving"] / max(result["rest_steps"], 1)
@@ -138,6 +140,8 @@ def summary(people: dict) -> dict:
     return {"people": len(rows),
             **{f"median_{k}": float(np.median([r[k] for r in rows]))
                for k in ("clip_by_clip", "back_to_back", "rest_share", "wrong_way_share")},
+            "pooled_clip_by_clip": pooled("clip_by_clip_error", "clip_by_clip_zero"),
+            "pooled_back_to_back": pooled("back_to_back_error", "back_to_back_zero"),
             "pooled_rest_share": pooled("rest_moving", "rest_steps"),
             "release_on": sum(bool(r["release_on"]) for r in rows),
             "pooled_wrong_way_share": pooled("against", "gesture_steps")}
@@ -175,8 +179,9 @@ def main(argv=None) -> int:
                 people[user] = read_person(module, *streams, args.rate_hz, not args.no_release)
         s = summary(people)
         result["models"][pathlib.Path(name).name] = {"summary": s, "people": people}
-        print(f"{pathlib.Path(name).name}: {s['people']} people; median share of zero twist "
-              f"{s['median_clip_by_clip']:.3f} clip by clip, {s['median_back_to_back']:.3f} back to back; "
+        print(f"{pathlib.Path(name).name}: {s['people']} people; share of zero twist (all steps pooled / median "
+              f"of people) {s['pooled_clip_by_clip']:.3f} / {s['median_clip_by_clip']:.3f} clip by clip, "
+              f"{s['pooled_back_to_back']:.3f} / {s['median_back_to_back']:.3f} back to back; "
               f"rest steps over a fifth of a command {100 * s['pooled_rest_share']:.1f} % "
               f"(median {100 * s['median_rest_share']:.1f} %); against the gesture "
               f"{100 * s['pooled_wrong_way_share']:.1f} %; rest release on for {s['release_on']}", flush=True)

@@ -256,7 +256,7 @@ def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int 
     return out
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.learning.ridge_blend_policy",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--policy", required=True, help="an exported 36-feature CCHP policy file")
@@ -266,7 +266,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--folds", type=int, default=DEFAULT_FOLDS,
                    help="choose the blend per person by this many folds of their clips (0: the CCHP alone)")
     p.add_argument("--rows", type=int, default=DEFAULT_ROWS, help="clips the choice of the blend steps through, at most")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = make_parser().parse_args(argv)
     out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows)
     print(f"wrote {out}")
     return 0
