@@ -228,15 +228,17 @@ def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_
     H = int(module.hidden_size)
     h, c, y, z = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.from_numpy(policy.sample_z(0).astype(np.float32))
     # The replayed skeleton, as the box sees it, through the stream (the file's own path-and-shape
-    # features interpolate across the simulated camera's dropped frames differently).
-    stream = PathShapeStream(10.0)
-    shape = np.array([stream.update(s)[0] for s in skeleton])
+    # features interpolate across the simulated camera's dropped frames differently), with the box's
+    # jump guard and fresh paths after a loss, and its rest release (learning.rest_release).
+    from rtcohand_drake.learning.rest_release import guard_stream
+
+    features = guard_stream(policy.release, clip.features[:, :FEATURE_DIM], skeleton.reshape(len(skeleton), 21, 3))
     offline = []
     with torch.no_grad():
-        for x in np.hstack([clip.features[:, :FEATURE_DIM], shape]).astype(np.float32):
+        for x in features.astype(np.float32):
             y, _, h, c, _ = module.step(torch.from_numpy(x), y, h, c, keys, values, z)
             offline.append(y.numpy().copy())
-    offline = np.array(offline)
+    offline = np.array(offline) * policy.release.gates(features)[:, None]
     k = np.round(log.sample_times() * 10.0).astype(int) - 1  # a sample at k/rate shows the update at (k-1)/rate
     ok = (k >= 1) & (k < len(offline))
     assert ok.sum() >= len(offline) - 3 and np.abs(offline).max() > 1e-3
