@@ -189,7 +189,7 @@ def test_every_quoted_command_parses():
 
 # --------------------------------------------------------------------------- results hold no machine paths
 
-# An absolute path (`/work/main/models/...`, `/tmp/soak`, `/home/me/...`) at the start of a word, a
+# An absolute path (`/srv/checkout/models/...`, `/tmp/soak`, `/home/me/...`) at the start of a word, a
 # quoted string or a value; a URL's `//host/` is not one.
 ABSOLUTE_PATH = re.compile(r"""(?:^|(?<=[\s"'(=:,\[]))/(?!/)[\w.+-]+/[^\s"',)\]]*""", re.M)
 TEXT_SUFFIXES = {".json", ".md", ".txt", ".csv", ".yaml", ".yml", ".log", ".tsv"}
@@ -204,5 +204,5 @@ def test_results_hold_no_absolute_paths():
             for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
                 found += [f"{path.relative_to(REPO)}:{number}: {m.group(0)}" for m in ABSOLUTE_PATH.finditer(line)]
     assert not found, "\n".join(found[:20]) + (f"\n... and {len(found) - 20} more" if len(found) > 20 else "")
-    assert ABSOLUTE_PATH.search('"log": "/work/main/out/x.h5"') and ABSOLUTE_PATH.search("rootdir: /tmp/soak")
+    assert ABSOLUTE_PATH.search('"log": "/srv/checkout/out/x.h5"') and ABSOLUTE_PATH.search("rootdir: /tmp/soak")
     assert not ABSOLUTE_PATH.search("see http://localhost:7000/x and models/cchp_default.pt, 0.5 m/s")

@@ -466,15 +466,21 @@ def cchp_from_policy(path: os.PathLike, overrides: Optional[dict] = None) -> Tup
     return model.eval(), card
 
 
-def export_model(model: Cchp, card: dict, out: os.PathLike) -> pathlib.Path:
-    """Script `model` and write it to `out` with `card` as its model card (atomically)."""
-    scripted = script_policy(model)
+def save_scripted(scripted: torch.jit.ScriptModule, out: os.PathLike, card: dict,
+                  card_name: str = "model_card.json") -> pathlib.Path:
+    """Write a scripted module to `out` with `card` as the JSON file `card_name` inside it, atomically
+    (a write that fails leaves any earlier file whole)."""
     out = pathlib.Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
-    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
+    torch.jit.save(scripted, str(tmp), _extra_files={card_name: json.dumps(card, indent=1)})
     os.replace(tmp, out)
     return out
+
+
+def export_model(model: Cchp, card: dict, out: os.PathLike) -> pathlib.Path:
+    """Script `model` and write it to `out` with `card` as its model card (atomically)."""
+    return save_scripted(script_policy(model), out, card)
 
 
 def make_parser() -> argparse.ArgumentParser:

@@ -187,12 +187,9 @@ def save_encoder(encoder: HandEncoder, out: os.PathLike, card: dict) -> pathlib.
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(encoder.eval())
     card = dict(card, kind="hand_encoder", input_dim=PATH_SHAPE_DIM, embed_dim=EMBED_DIM)
-    out = pathlib.Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    torch.jit.save(scripted, str(tmp), _extra_files={"encoder_card.json": json.dumps(card, indent=1)})
-    os.replace(tmp, out)
-    return out
+    from rtcohand_drake.learning.export import save_scripted  # export loads the training code; only here
+
+    return save_scripted(scripted, out, card, "encoder_card.json")
 
 
 def load_encoder(path: os.PathLike) -> Tuple[torch.jit.ScriptModule, dict]:

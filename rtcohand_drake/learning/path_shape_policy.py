@@ -53,7 +53,6 @@ on recorded development people, the folds also on a development simulated popula
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pathlib
 import sys
@@ -419,7 +418,7 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             ) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
-    from rtcohand_drake.learning.export import policy_and_card
+    from rtcohand_drake.learning.export import policy_and_card, save_scripted
     from rtcohand_drake.learning.hand_encoder import load_encoder
 
     inner, card = policy_and_card(policy)  # checked as load_policy checks a policy file
@@ -439,12 +438,7 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
     if encoder_card is not None:
         card["path_shape_read"]["encoder"] = dict(encoder_card, file=pathlib.Path(encoder).name)
-    out = pathlib.Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
-    os.replace(tmp, out)
-    return out
+    return save_scripted(scripted, out, card)
 
 
 def make_parser() -> argparse.ArgumentParser:

@@ -30,7 +30,6 @@ ceil(extra_size / K) columns | the CCHP's keys].
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pathlib
 import sys
@@ -233,7 +232,7 @@ def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int 
                              lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS
                              ) -> pathlib.Path:
     """Writes the blended policy file, its model card extended with the ridge read's settings."""
-    from rtcohand_drake.learning.export import policy_and_card
+    from rtcohand_drake.learning.export import policy_and_card, save_scripted
 
     inner, card = policy_and_card(policy)
     if int(inner.feature_dim) != FEATURE_DIM:
@@ -248,12 +247,7 @@ def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int 
         "blend_rows": rows,
         "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; "
                 "blended with the CCHP by B chosen per person by folds of their clips"})
-    out = pathlib.Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    torch.jit.save(scripted, str(tmp), _extra_files={"model_card.json": json.dumps(card, indent=1)})
-    os.replace(tmp, out)
-    return out
+    return save_scripted(scripted, out, card)
 
 
 def make_parser() -> argparse.ArgumentParser:
