@@ -136,7 +136,7 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     read with the other folds' clips as context: here the kernel read is refitted from scratch."""
     inner_path = _inner_policy(tmp_path)
     path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3,
-                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH)
+                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0)
     module, inner = load_policy(path), load_policy(inner_path)
     rng = np.random.default_rng(7)
     context = _pieces(rng, [14, 9, 12, 11, 8])
@@ -152,7 +152,7 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     apart = np.sort(d[d > 0])
     width = 0.6 * apart[(len(apart) - 1) // 2]
     starts = np.cumsum([0] + [len(x) for x, _ in context])
-    num = den = 0.0
+    num = den = base = 0.0
     for f in range(3):
         out = [b for b in range(5) if b % 3 == f]
         rows = [b for b in range(5) if b % 3 != f]
@@ -174,9 +174,17 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
                     cchp = y_prev.numpy().astype(np.float64)
                     num += (kernel[t] - cchp) @ (y_all[span[t]] - cchp)
                     den += (kernel[t] - cchp) @ (kernel[t] - cchp)
+                    base += (y_all[span[t]] - cchp) @ (y_all[span[t]] - cchp)
     expected = float(np.clip(num / den, 0.0, 1.0))
     assert 0.05 < expected < 0.999  # a blend, not a bound
     assert float(module._blend(keys)) == pytest.approx(expected, abs=2e-4)
+    # The share of the CCHP's squared error over those steps that the blend at A removes.
+    cchp_error = base
+    # |y - (A k + (1 - A) c)|^2 = |y - c|^2 - 2 A (k - c).(y - c) + A^2 |k - c|^2, summed over the steps
+    blend_error = cchp_error - 2 * expected * num + expected ** 2 * den
+    used, fitted, gain = (float(v) for v in module.blend_choice(keys))
+    assert used == fitted == pytest.approx(expected, abs=2e-4)
+    assert gain == pytest.approx(1.0 - blend_error / cchp_error, abs=2e-4)
 
 
 def test_bad_settings_and_wide_inner_files_are_one_line_errors(tmp_path):
@@ -257,12 +265,14 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert card["path_shape_read"] == {
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
+        "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
         "features": card["path_shape_read"]["features"]}
     wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
+    assert (wide.kernel_anchors, wide.min_gain) == (psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
     assert (wide.match_share, wide.match_velocity_weight, wide.match_tau) == (0.25, 50.0, 0.05) == (
@@ -272,7 +282,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(_pieces(rng, [25, 18])))
     keys, values, z_mu, z_sigma = wide.encode_context(x_c, y_c, mask)
     inner_keys, inner_values, inner_mu, inner_sigma = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
-    assert torch.equal(keys[:, -inner_keys.shape[1]:], inner_keys) and torch.equal(values, inner_values)
+    assert torch.equal(wide._inner_keys(keys), inner_keys) and torch.equal(values, inner_values)
     assert torch.equal(z_mu, inner_mu) and torch.equal(z_sigma, inner_sigma)
 
 
@@ -280,9 +290,12 @@ def test_the_shipped_path_shape_file_is_what_the_builder_writes_today(tmp_path):
     """Rebuilt from models/cchp_default.pt by today's code, the file encodes and steps as the shipped one."""
     import pathlib
 
+    from rtcohand_drake.learning import path_shape_policy as psp
+
     models = pathlib.Path(__file__).resolve().parents[1] / "models"
     shipped = load_policy(models / "cchp_path_shape.pt")
-    rebuilt = load_policy(build_path_shape_policy(models / "cchp_default.pt", tmp_path / "rebuilt.pt"))
+    rebuilt = load_policy(build_path_shape_policy(models / "cchp_default.pt", tmp_path / "rebuilt.pt",
+                                                  min_gain=psp.DEFAULT_MIN_GAIN))
     rng = np.random.default_rng(6)
     context, (target, _) = _pieces(rng, [25, 18, 20, 16, 22]), _pieces(rng, [6])[0]
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
@@ -300,6 +313,100 @@ def test_the_shipped_path_shape_file_is_what_the_builder_writes_today(tmp_path):
                 states[i] = (h, c, y)
                 out.append(y)
             assert torch.equal(out[0], out[1])
+
+
+def test_a_long_context_is_read_from_anchors_spread_over_it(tmp_path):
+    """A context longer than `--anchors` N: the kernel read is fitted on N of its steps spread evenly
+    over it (step floor(i K / N)), checked against the kernel ridge on those steps written out in
+    numpy; the attention is its equivalent kernel on them and 0 elsewhere; the keys and the step do
+    not grow as K^2 (the keys hold the CCHP's, N^2 + O(N + K) more)."""
+    from rtcohand_drake.learning import path_shape_policy as psp
+
+    n = 16
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "anchors.pt", blend=1.0, bandwidth=0.6,
+                                   lam=0.4, folds=0, commit=(0.0, 0.2, 0.6), match=NO_MATCH, anchors=n)
+    module = load_policy(path)
+    rng = np.random.default_rng(12)
+    context, (target, _) = _pieces(rng, [30, 22, 17]), _pieces(rng, [8])[0]
+    k = sum(len(x) for x, _ in context)
+    steps = np.floor(np.arange(n) * k / n).astype(int)
+    x_all = np.concatenate([x for x, _ in context])
+    y_all = np.concatenate([y for _, y in context])
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
+    # The standardisation is the whole context's; the ridge is over the anchors.
+    s_all = x_all[:, FEATURE_DIM:].astype(np.float64)
+    mean, spread = s_all.mean(0), s_all.std(0) + 1e-6
+    s = (s_all[steps] - mean) / spread
+    d = np.sqrt(((s[:, None] - s[None]) ** 2).sum(-1))
+    apart = np.sort(d[d > 0])
+    width = 0.6 * apart[(len(apart) - 1) // 2]
+    m_inv = np.linalg.inv(np.exp(-d ** 2 / (2 * width ** 2)) + 0.4 * np.eye(n))
+    H = int(module.hidden_size)
+    h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
+    with torch.no_grad():
+        for x in target:
+            q = (x[FEATURE_DIM:].astype(np.float64) - mean) / spread
+            kern = np.exp(-((s - q) ** 2).sum(1) / (2 * width ** 2))
+            y, _, h, c, attention = module.step(torch.from_numpy(x), y, h, c, keys, values, z_mu)
+            assert np.allclose(y.numpy(), kern @ m_inv @ y_all[steps], atol=2e-5)
+            expected = np.zeros(k)
+            expected[steps] = kern @ m_inv
+            assert np.allclose(attention.numpy(), expected, atol=2e-5)
+    inner_width = load_policy(tmp_path / "inner.pt").encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c,
+                                                                   mask)[0].shape[1]
+    own = n * (n + PATH_SHAPE_DIM + 8) + module.extra_size
+    assert keys.shape == (k, inner_width + -(-own // k))
+    with pytest.raises(InputError, match="anchors must be"):
+        build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", anchors=1)
+
+
+def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
+    """`--min-gain G`: A as fitted when the blend removes at least G of the CCHP's squared error over the
+    person's own clips (`blend_choice`; the share is checked against its definition above), else 0 and
+    the file's output is the CCHP's. A person only the path-and-shape read fits gets it; a person whose
+    labels the path and shape do not tell gets the CCHP."""
+    inner_path = _inner_policy(tmp_path)
+    inner = load_policy(inner_path)
+    rng = np.random.default_rng(7)
+    told = _pieces(rng, [14, 9, 12, 11, 8])
+    for x, y in told:  # labels that the path and shape tell, and the 36 motion features do not
+        y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
+    untold = _pieces(rng, [14, 9, 12, 11, 8])  # labels of nothing in the features
+    open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", bandwidth=0.6, lam=0.01,
+                                                    folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0))
+    choices = {}
+    for name, context in (("told", told), ("untold", untold)):
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+        used, fitted, gain = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
+        assert used == fitted
+        choices[name] = (fitted, gain)
+    assert choices["told"][1] > 0.5 and choices["untold"][1] < choices["told"][1] - 0.3, choices
+    gate = 0.5 * (choices["told"][1] + choices["untold"][1])
+    gated = load_policy(build_path_shape_policy(inner_path, tmp_path / "gated.pt", bandwidth=0.6, lam=0.01,
+                                                folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=gate))
+    target = _pieces(rng, [10])[0][0]
+    for name, context in (("told", told), ("untold", untold)):
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+        keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
+        used, fitted, gain = (float(v) for v in gated.blend_choice(keys))
+        assert (fitted, gain) == pytest.approx(choices[name], abs=1e-6)
+        assert used == (fitted if name == "told" else 0.0)
+        if name == "untold":  # the CCHP alone, step by step
+            inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c,
+                                                                         mask)
+            H, Hi = int(gated.hidden_size), int(inner.hidden_size)
+            h, c, y, hi, ci, yi = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.zeros(Hi), torch.zeros(Hi), \
+                torch.zeros(6)
+            with torch.no_grad():
+                for x in target:
+                    x = torch.from_numpy(x)
+                    y, _, h, c, _ = gated.step(x, y, h, c, keys, values, z_mu)
+                    yi, _, hi, ci, _, _, _ = inner.step_read(x[:FEATURE_DIM], yi, hi, ci, inner_keys, inner_values,
+                                                             inner_z)
+                    assert torch.allclose(y, yi, atol=1e-7)
+    with pytest.raises(InputError, match="min_gain"):
+        build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_gain=1.0)
 
 
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):

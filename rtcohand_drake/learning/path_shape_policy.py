@@ -1,7 +1,11 @@
 """A policy file that adds a kernel read of the hand's path and shape to an exported CCHP policy.
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
-        [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--encoder ENCODER.pt]
+        [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--anchors N] [--min-gain G]
+        [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--encoder ENCODER.pt]
+
+The policy file for real hands, `models/cchp_path_shape.pt`, is this file built over the default
+CCHP, `models/cchp_default.pt`, with the defaults below.
 
 The 36 hand-part velocities carry the hand's motion, not the posture it is made
 in nor the path it took: a one-finger gesture and the same gesture of the whole
@@ -13,16 +17,20 @@ It keeps the exported CCHP policy whole, as a submodule fed the first 36, and
 adds a Gaussian-kernel ridge read of the rest over the person's context:
 
     encode_context:  s_i = the context steps' path-and-shape features, standardised by their
-                     own mean and spread; G_ij = exp(-|s_i - s_j|^2 / (2 b^2)), b = `--bandwidth`
-                     x the median distance between context steps; M = (G + lambda I)^-1;
-                     W = M Y (Y the context steps' labels)
+                     own mean and spread; the anchors: every step of a context of at most N =
+                     `--anchors` steps, else N steps spread evenly over it; over the anchors,
+                     G_ij = exp(-|s_i - s_j|^2 / (2 b^2)), b = `--bandwidth` x the median distance
+                     between them; M = (G + lambda I)^-1; W = M Y (Y the anchors' labels)
     step:            k_i = exp(-|s(t) - s_i|^2 / (2 b^2)); r_k = k . W = (k M) . values
                      mean = A r_k + (1 - A) mean_CCHP,  read = A r_k + (1 - A) read_CCHP
 
 A is `--blend`, or with `--folds F` > 0 (the shipped file: 4) it is chosen for each person when the
 context is encoded: the least-squares blend of the two reads over the person's own clips, each clip
-read with the other folds' clips as context (`_cross_validated_blend`). The kernel read suits
-recorded people, whose few strokes differ in posture and path; the CCHP suits sustained motions.
+read with the other folds' clips as context (`_cross_validated_blend`). With `--min-gain G` that
+blend is used only for a person whose clips it reads with at least G less squared error than the
+CCHP alone; for anyone else A = 0 (`blend_choice` gives A, the fitted A and that share). The kernel
+read suits recorded people, whose few strokes differ in posture and path; the CCHP suits sustained
+motions and the simulated people it was trained on.
 
 With attention = A k M + (1 - A) attention_CCHP over the K context steps (the CCHP's `values`, which
 a CCHP with `label_lead` shifts that many steps on, are returned as they are; the kernel read reads
@@ -43,11 +51,16 @@ MATCH_MAX_STEPS context steps; A is chosen on the committed kernel read without 
 With `--encoder` (a `learning.hand_encoder` file, learned across people), s_i and s(t) are the
 encoder's embedding of the path and shape instead of the features themselves; the rest is unchanged.
 
-Keys (K, D): [M (K) | s (PATH_SHAPE_DIM, or the embedding's width) | W (6) | mean, spread and b of the standardisation and A
-(then the command sizes and the match frames' mean, spread and fit, when on), row-major over ceil(extra_size / K)
-columns | with the match: each step's standardised frame (66), label (6), position in its clip and clip | the CCHP's keys]. The settings were chosen
-on recorded development people, the folds also on a development simulated population
-(docs/real_people.md, section 3).
+Keys (K, D_in + ceil(own / K)): one block whose memory holds the CCHP's keys (K, D_in), then the
+kernel read's part (`_own`), each piece row-major so that a step reads it as a view, without a copy:
+over the a = min(K, N) anchors, M (a, a), s (a, PATH_SHAPE_DIM or the embedding's width), W (a, 6),
+|s|^2 (a) and each anchor's step in the context (a); then the extras (the standardisation's mean and
+spread, b and A, [the command sizes], [the match frames' mean, spread and fit], A as fitted and its
+gain); then, with the match, each context step's standardised frame (66), its weighted square sum,
+label (6), position in its clip and clip (K rows). A step costs O(N) for the kernel read and O(K) for
+the match (on while K <= MATCH_MAX_STEPS), and the keys O(K D_in + N^2). The settings were chosen on
+recorded development people, the folds, the anchors and the gain also on development simulated
+populations (docs/real_people.md, section 3; docs/policy.md).
 """
 
 from __future__ import annotations
@@ -83,7 +96,19 @@ MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU = 0.25, 50.0, 0.05
 DEFAULT_MATCH_SHARE = MATCH_SHARE  # the shipped file's
 MATCH_MAX_STEPS = 4096  # context steps the time warp's state has room for; a longer context is read without it
 MATCH_FRAME_DIM = 66  # the hand's shape about its centre (63) and the centre's velocity over 0.4 s (3)
-MATCH_COLUMNS = MATCH_FRAME_DIM + 6 + 2  # a context step's frame, label, position in its clip and clip
+# A context step's frame, its weighted square sum, label, position in its clip and clip.
+MATCH_COLUMNS = MATCH_FRAME_DIM + 1 + 6 + 2
+# The context steps the kernel read is fitted on, at most: a longer context is read from this many of its
+# steps, spread evenly over it, so that its solve, its keys and each step stay bounded (a 10,000-step
+# context: keys of K x D_in + ANCHORS^2 + O(K) floats and a step over ANCHORS steps, not K^2 and K). As many
+# as the match's state holds: every recorded person (900-1,470 steps at 10 Hz) and every simulated one
+# (72 clips, about 3,000 steps) is read from all of their steps, as before the anchors.
+DEFAULT_ANCHORS = MATCH_MAX_STEPS
+# With `--min-gain G`, a person's kernel read is used only when the fitted blend removes at least G of the
+# CCHP's squared error over their own clips. Off in the shipped file: gated at 0.2 (above every
+# development simulated person's share) the file read two of three held-out populations worse than the
+# CCHP alone (docs/policy.md).
+DEFAULT_MIN_GAIN = 0.0
 MATCH_NONE = 1e18  # the cost of a match that cannot be made
 
 
@@ -93,7 +118,8 @@ class PathShapeKernelPolicy(nn.Module):
     def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
                  folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None,
                  commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH),
-                 match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU)):
+                 match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
+                 anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -104,7 +130,13 @@ class PathShapeKernelPolicy(nn.Module):
             raise InputError(f"commit needs a share in [0, 1] and 0 <= low < high; got {tuple(commit)}")
         if not (0.0 <= match[0] <= 1.0 and match[1] >= 0 and match[2] > 0):
             raise InputError(f"match needs a share in [0, 1], a velocity weight >= 0 and tau > 0; got {tuple(match)}")
+        if anchors < 2 or not 0.0 <= min_gain < 1.0:
+            raise InputError(f"anchors must be at least 2 and min_gain in [0, 1); got {anchors}, {min_gain}")
+        # A person's kernel read is used only if, over their own clips, the fitted blend removes at least
+        # this share of the CCHP's squared error (else A = 0: the CCHP alone).
+        self.min_gain = float(min_gain)
         self.inner = inner
+        self.kernel_anchors = int(anchors)  # the context steps the kernel read is fitted on, at most
         self.inner_hidden = int(inner.hidden_size)
         self.inner_query_size = int(inner.query_size)
         # The kernel reads the path and shape as they are, or their embedding by a learned encoder
@@ -144,18 +176,47 @@ class PathShapeKernelPolicy(nn.Module):
         # Extras: the standardisation's mean and spread, b, A, [the command sizes], [the match frame's
         # mean and spread, and 1 where the context fits the match's state].
         self.match_extras_at = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
-        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0)
+        # ... and last, A as fitted and the share of the CCHP's error over the person's clips that it removes.
+        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0) + 2
 
-    def _extras_end(self, k: int) -> int:
-        return k + self.shape_dim + 6 + (self.extra_size + k - 1) // k
+    def _anchors(self, k: int) -> int:
+        """a: the context steps the kernel read is fitted on, of K."""
+        return min(k, self.kernel_anchors)
+
+    def _own_size(self, k: int) -> int:
+        """The floats of the kernel read's (and the match's) part of the keys, for K context steps."""
+        a = self._anchors(k)
+        return a * (a + self.shape_dim + 8) + self.extra_size + (k * self.match_columns if self.match_share > 0 else 0)
+
+    def _inner_keys(self, keys: torch.Tensor) -> torch.Tensor:
+        """The CCHP's keys (K, D_in): the first K x D_in floats of the keys' memory (a view, no copy)."""
+        k = keys.size(0)
+        d_in = keys.size(1) - (self._own_size(k) + k - 1) // k
+        return keys.reshape(-1)[:k * d_in].view(k, d_in)
+
+    def _own(self, keys: torch.Tensor) -> torch.Tensor:
+        """The kernel read's part of the keys' memory, flat (a view, no copy): M (a, a), s (a, shape_dim),
+        W (a, 6), |s|^2 (a), each anchor's step in the context (a), the extras, then the match's block."""
+        k = keys.size(0)
+        start = keys.numel() - k * ((self._own_size(k) + k - 1) // k)
+        return keys.reshape(-1)[start:start + self._own_size(k)]
+
+    def _anchor_part(self, keys: torch.Tensor, column: int, width: int) -> torch.Tensor:
+        """(a, width): the anchors' part that starts `column` columns into their rows, [M (a) | s
+        (shape_dim) | W (6) | |s|^2 (1) | the anchor's step in the context (1)], each part row-major."""
+        a = self._anchors(keys.size(0))
+        return self._own(keys)[a * column:a * (column + width)].view(a, width)
 
     def _extras(self, keys: torch.Tensor) -> torch.Tensor:
-        k = keys.size(0)
-        return keys[:, k + self.shape_dim + 6:self._extras_end(k)].reshape(-1)
+        a = self._anchors(keys.size(0))
+        at = a * (a + self.shape_dim + 8)
+        return self._own(keys)[at:at + self.extra_size]
 
-    def _block(self, k: int) -> int:
-        """Columns of the kernel read's part of the keys (and the match's), for K context steps."""
-        return self._extras_end(k) + (self.match_columns if self.match_share > 0 else 0)
+    def _match_block(self, keys: torch.Tensor) -> torch.Tensor:
+        k = keys.size(0)
+        a = self._anchors(k)
+        at = a * (a + self.shape_dim + 8) + self.extra_size
+        return self._own(keys)[at:at + k * self.match_columns].view(k, self.match_columns)
 
     def _match_frames(self, p: torch.Tensor) -> torch.Tensor:
         """(N, 66) match frames of path-and-shape rows (N, PATH_SHAPE_DIM): the shape about the centre
@@ -173,31 +234,43 @@ class PathShapeKernelPolicy(nn.Module):
         if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
             raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
         keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c[:, :, :self.motion_feature_dim].contiguous(), y_c, m)
-        s = self.encoder(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0)).to(torch.float64)
-        k = s.size(0)
-        mean = s.mean(0)
-        spread = s.std(0, unbiased=False) + 1e-6
-        s = (s - mean) / spread
+        s_all = self.encoder(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0)).to(torch.float64)
+        k = s_all.size(0)
+        mean = s_all.mean(0)
+        spread = s_all.std(0, unbiased=False) + 1e-6
+        s_all = (s_all - mean) / spread
+        # The anchors: every step of a context of at most `kernel_anchors`, else that many spread evenly.
+        a = self._anchors(k)
+        if a < k:
+            anchor = torch.floor(torch.arange(a, dtype=torch.float64) * (float(k) / float(a))).to(torch.int64)
+        else:
+            anchor = torch.arange(k)
+        s = s_all[anchor]
         d = torch.cdist(s, s)
         apart = d[d > 0]
         width = self.kernel_bandwidth * (apart.median() if apart.numel() > 0 else torch.ones((), dtype=torch.float64))
         gram = torch.exp(-d ** 2 / (2.0 * width ** 2))
-        m_inv = torch.linalg.inv(gram + self.kernel_lambda * torch.eye(k, dtype=torch.float64))
+        m_inv = torch.linalg.inv(gram + self.kernel_lambda * torch.eye(a, dtype=torch.float64))
         # The context's own labels: a CCHP with `label_lead` reads labels that many steps later (its
         # `values`); the kernel read, chosen on recorded people, reads the labels as they are.
         y_all = torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0)
-        w = torch.mm(m_inv, y_all)
+        y_anchor = y_all[anchor]
+        w = torch.mm(m_inv, y_anchor)
         # Each axis's command size: the largest label on it in the context (0: never commanded).
         sizes = y_all.abs().max(0)[0]
         blend = torch.full((1,), self.kernel_blend, dtype=torch.float64)
+        fitted = torch.full((1,), self.kernel_blend, dtype=torch.float64)
+        gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
         if self.blend_folds > 0 and x_c.size(0) > 1:
-            blend = self._cross_validated_blend(x_c, y_c, m, m_inv, w, sizes).view(1)
-        extra_cols = self._extras_end(k) - (k + self.shape_dim + 6)
-        extras = torch.zeros(k * extra_cols, dtype=torch.float64)
+            fitted_a, gain_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
+            fitted, gain = fitted_a.view(1), gain_a.view(1)
+            blend = fitted if float(gain_a) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
         parts = [mean, spread, width.view(1), blend]
         if self.commit_share > 0:
             parts.append(sizes)
-        blocks = [m_inv, s, w]
+        # The kernel read's part: over the anchors, M, s, W, |s|^2 and each anchor's step in the context,
+        # each row-major; then the extras; then the match's block (K rows).
+        own = [m_inv.reshape(-1), s.reshape(-1), w.reshape(-1), (s * s).sum(1), anchor.to(torch.float64)]
         if self.match_share > 0:
             f = self._match_frames(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0
                                                     ).to(torch.float64))
@@ -207,14 +280,22 @@ class PathShapeKernelPolicy(nn.Module):
             clip = torch.arange(m.size(0)).view(-1, 1).expand(m.size(0), m.size(1))[m].to(torch.float64)
             fits = torch.ones(1, dtype=torch.float64) if k <= self.match_max_steps else torch.zeros(1, dtype=torch.float64)
             parts += [f_mean, f_spread, fits]
-            match_block = torch.cat([(f - f_mean) / f_spread, y_all, position.view(-1, 1), clip.view(-1, 1)], 1)
+            frames = (f - f_mean) / f_spread
+            weighted_square = (frames * frames * self.match_weight.to(torch.float64)).sum(1, keepdim=True)
+            parts += [fitted, gain]
+            own += [torch.cat(parts),
+                    torch.cat([frames, weighted_square, y_all, position.view(-1, 1), clip.view(-1, 1)], 1).reshape(-1)]
         else:
-            match_block = torch.zeros(k, 0, dtype=torch.float64)
-        extras[:self.extra_size] = torch.cat(parts)
-        blocks.append(extras.view(k, extra_cols))
-        blocks.append(match_block)
-        keys = torch.cat(blocks, 1).to(torch.float32)
-        return torch.cat([keys, keys_in], 1), values, z_mu, z_sigma
+            own.append(torch.cat(parts + [fitted, gain]))
+        # One (K, D_in + ceil(own / K)) block whose memory is the CCHP's keys, then the kernel read's part:
+        # each part is read as a view of it, without a copy.
+        d_in = keys_in.size(1)
+        cols = d_in + (self._own_size(k) + k - 1) // k
+        flat = torch.zeros(k * cols, dtype=torch.float32)
+        flat[:k * d_in] = keys_in.reshape(-1)
+        own_flat = torch.cat(own).to(torch.float32)
+        flat[k * d_in:k * d_in + own_flat.numel()] = own_flat
+        return flat.view(k, cols), values, z_mu, z_sigma
 
     def _committed(self, r: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
         """Rows of kernel reads (N, 6), each (1 - share) as it is + share x its dominant command (the axis
@@ -231,21 +312,28 @@ class PathShapeKernelPolicy(nn.Module):
         return self.commit_share * command + (1.0 - self.commit_share) * r
 
     def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, m_inv: torch.Tensor,
-                               w: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
+                               y_anchor: torch.Tensor, anchor: torch.Tensor, sizes: torch.Tensor
+                               ) -> Tuple[torch.Tensor, torch.Tensor]:
         """A in [0, 1] that best blends the two reads on the person's own clips, each clip read with
         the clips of the other folds as context (clip b is in fold b mod F): the CCHP stepped over
         the clip (its own mean fed back, z the prior mean), the kernel read from the exact
-        leave-fold-out solution of the whole context's solve (Y_S - (M_SS)^-1 (M Y)_S for the fold's
-        steps S). Least squares over every step of `blend_rows` clips spread over the context."""
+        leave-fold-out solution of the whole solve over the anchors (Y_S - (M_SS)^-1 (M Y)_S for the
+        fold's anchors S). Least squares over every anchor step of `blend_rows` clips spread over the
+        context (every step, when each is an anchor). Returns (A, the share of the CCHP's squared error
+        over those steps that the blend at A removes)."""
         n_rows = x_c.size(0)
         folds = min(self.blend_folds, n_rows)
         counts = m.sum(1)
         starts = torch.cumsum(counts, 0) - counts
-        y = torch.nan_to_num(y_c[m].to(torch.float64), 0.0, 0.0, 0.0)
-        fitted_residual = torch.mm(m_inv, y)  # (M Y): the full solve's residuals, scaled
+        n_steps = int(counts.sum())
+        a = anchor.size(0)
+        anchor_of = torch.full((n_steps,), -1, dtype=torch.int64)
+        anchor_of[anchor] = torch.arange(a)
+        fitted_residual = torch.mm(m_inv, y_anchor)  # (M Y): the full solve's residuals, scaled
         stride = max(1, n_rows // self.blend_rows)
         num = torch.zeros((), dtype=torch.float64)
         den = torch.zeros((), dtype=torch.float64)
+        base = torch.zeros((), dtype=torch.float64)
         hi = self.inner_hidden
         for f in range(folds):
             out_rows: List[int] = []
@@ -257,12 +345,17 @@ class PathShapeKernelPolicy(nn.Module):
                     spans.append(torch.arange(int(starts[b]), int(starts[b] + counts[b])))
                 else:
                     in_rows.append(b)
-            steps = torch.cat(spans)
-            loo = self._committed(y[steps] - torch.linalg.solve(m_inv[steps][:, steps], fitted_residual[steps]), sizes)
+            in_fold = anchor_of[torch.cat(spans)]
+            in_fold = in_fold[in_fold >= 0]  # the fold's anchors, S
+            if in_fold.numel() == 0:
+                continue
+            row_of = torch.full((a,), -1, dtype=torch.int64)
+            row_of[in_fold] = torch.arange(in_fold.size(0))
+            loo = self._committed(y_anchor[in_fold] - torch.linalg.solve(m_inv[in_fold][:, in_fold],
+                                                                          fitted_residual[in_fold]), sizes)
             keep = torch.tensor(in_rows)
             keys, values, z, _ = self.inner.encode_context(
                 x_c[keep][:, :, :self.motion_feature_dim].contiguous(), y_c[keep], m[keep])
-            offset = 0
             for b in out_rows:
                 n = int(counts[b])
                 if b % stride == 0:
@@ -273,13 +366,18 @@ class PathShapeKernelPolicy(nn.Module):
                         y_prev, _, h, c, _, _, _ = self.inner.step_read(
                             torch.nan_to_num(x_c[b, t, :self.motion_feature_dim], 0.0, 0.0, 0.0), y_prev, h, c,
                             keys, values, z)
-                        gap = loo[offset + t] - y_prev.to(torch.float64)
-                        num += (gap * (y[int(starts[b]) + t] - y_prev.to(torch.float64))).sum()
-                        den += (gap * gap).sum()
-                offset += n
+                        j = int(anchor_of[int(starts[b]) + t])
+                        if j >= 0:
+                            gap = loo[int(row_of[j])] - y_prev.to(torch.float64)
+                            miss = y_anchor[j] - y_prev.to(torch.float64)
+                            num += (gap * miss).sum()
+                            den += (gap * gap).sum()
+                            base += (miss * miss).sum()
         if den <= 0:
-            return torch.full((), self.kernel_blend, dtype=torch.float64)
-        return torch.clamp(num / den, 0.0, 1.0)
+            return torch.full((), self.kernel_blend, dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64)
+        a_fit = torch.clamp(num / den, 0.0, 1.0)
+        removed = 2.0 * a_fit * num - a_fit * a_fit * den  # base - the blend's squared error
+        return a_fit, removed / torch.clamp(base, min=1e-12)
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
         return self._blend_of(self._extras(keys))
@@ -288,12 +386,23 @@ class PathShapeKernelPolicy(nn.Module):
         """A, from `_extras(keys)`."""
         return extras[2 * self.shape_dim + 1]
 
+    @torch.jit.export
+    def blend_choice(self, keys: torch.Tensor) -> torch.Tensor:
+        """[A used, A as fitted, the share of the CCHP's error on the person's own clips the fitted blend
+        removes (-1: not cross-validated)] for encoded keys."""
+        extras = self._extras(keys)
+        return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 2], extras[self.extra_size - 1]])
+
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
-        """k (1, K) of a standardised query (1, shape_dim); `extras` is `_extras(keys)`."""
-        k = keys.size(0)
-        s = keys[:, k:k + self.shape_dim]
+        """k (1, a) of a standardised query (1, shape_dim) against the anchors; `extras` is `_extras(keys)`.
+        |q - s_i|^2 = |s_i|^2 - 2 s_i . q + |q|^2, read from the keys in place."""
+        a = self._anchors(keys.size(0))
+        s = self._anchor_part(keys, a, self.shape_dim)
+        square = self._anchor_part(keys, a + self.shape_dim + 6, 1).view(-1)
+        q = q.view(-1)
+        d2 = torch.clamp(square - 2.0 * torch.mv(s, q) + (q * q).sum(), min=0.0)
         width = extras[2 * self.shape_dim]
-        return torch.exp(-torch.cdist(q, s) ** 2 / (2.0 * width ** 2))
+        return torch.exp(-d2 / (2.0 * width ** 2)).view(1, -1)
 
     def _standardise(self, x: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
         x = self.encoder(torch.nan_to_num(x, 0.0, 0.0, 0.0).view(1, -1))
@@ -301,15 +410,20 @@ class PathShapeKernelPolicy(nn.Module):
 
     @torch.jit.export
     def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
-        """[K]: A k M + (1 - A) the CCHP's attention (mean over its heads)."""
+        """[K]: A k M + (1 - A) the CCHP's attention (mean over its heads); k M over the anchors, 0 on the
+        steps that are not anchors."""
         k = keys.size(0)
-        inner = self.inner.attention_of(query[:self.inner_query_size], keys[:, self._block(k):])
+        a = self._anchors(k)
+        inner = self.inner.attention_of(query[:self.inner_query_size], self._inner_keys(keys))
         if inner.dim() == 2:
             inner = inner.mean(0)
         kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys, self._extras(keys)),
-                          keys[:, :k]).view(-1)
-        a = self._blend(keys)
-        return a * kernel + (1.0 - a) * inner
+                          self._anchor_part(keys, 0, a)).view(-1)
+        if a < k:
+            step_of = self._anchor_part(keys, a + self.shape_dim + 7, 1).view(-1).to(torch.int64)
+            kernel = torch.zeros(k).index_add_(0, step_of, kernel)
+        a_blend = self._blend(keys)
+        return a_blend * kernel + (1.0 - a_blend) * inner
 
     def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
               values: torch.Tensor, z: torch.Tensor
@@ -318,13 +432,14 @@ class PathShapeKernelPolicy(nn.Module):
         if x_t.numel() != self.feature_dim:
             raise RuntimeError(f"step: x_t must have {self.feature_dim} features, got {x_t.numel()}")
         k = keys.size(0)
+        a = self._anchors(k)
         x_t = x_t.view(-1)
         hi = self.inner_hidden
         mean_i, std, h2, c2, read_i, v, query_i = self.inner.step_read(
-            x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], keys[:, self._block(k):], values, z)
+            x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], self._inner_keys(keys), values, z)
         extras = self._extras(keys)
         q = self._standardise(x_t[self.motion_feature_dim:], extras)
-        read_k = torch.mm(self._kernel(q, keys, extras), keys[:, k + self.shape_dim:k + self.shape_dim + 6])
+        read_k = torch.mm(self._kernel(q, keys, extras), self._anchor_part(keys, a + self.shape_dim, 6))
         if self.commit_share > 0:
             read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]
                                      ).to(read_k.dtype)
@@ -340,9 +455,9 @@ class PathShapeKernelPolicy(nn.Module):
                 length = torch.zeros(self.match_max_steps)
             h_next = torch.cat([h_next, cost])
             c_next = torch.cat([c_next, length])
-        a = self._blend_of(extras)
-        mean = a * read_k + (1.0 - a) * mean_i
-        read = (a * read_k + (1.0 - a) * read_i.mean(0)).view(1, 6)
+        a_blend = self._blend_of(extras)
+        mean = a_blend * read_k + (1.0 - a_blend) * mean_i
+        read = (a_blend * read_k + (1.0 - a_blend) * read_i.mean(0)).view(1, 6)
         return (mean, std, h_next, c_next, read, v, torch.cat([query_i, q.view(-1)]))
 
     def _match(self, p: torch.Tensor, cost: torch.Tensor, length: torch.Tensor, keys: torch.Tensor,
@@ -355,12 +470,16 @@ class PathShapeKernelPolicy(nn.Module):
         `_extras(keys)`."""
         k = keys.size(0)
         at = self.match_extras_at
-        block = keys[:, self._extras_end(k):self._block(k)]
-        frames, labels = block[:, :self.match_frame_dim], block[:, self.match_frame_dim:self.match_frame_dim + 6]
-        position, clip = block[:, self.match_frame_dim + 6], block[:, self.match_frame_dim + 7].to(torch.int64)
+        block = self._match_block(keys)
+        fd = self.match_frame_dim
+        frames, weighted_square = block[:, :fd], block[:, fd]
+        labels = block[:, fd + 1:fd + 7]
+        position, clip = block[:, fd + 7], block[:, fd + 8].to(torch.int64)
         f = self._match_frames(torch.nan_to_num(p, 0.0, 0.0, 0.0).view(1, -1))
-        f = (f - extras[at:at + self.match_frame_dim]) / extras[at + self.match_frame_dim:at + 2 * self.match_frame_dim]
-        d = ((frames - f) ** 2 * self.match_weight).sum(1)
+        f = ((f - extras[at:at + fd]) / extras[at + fd:at + 2 * fd]).view(-1)
+        # d_i = sum_j w_j (frame_ij - f_j)^2, from the keys in place.
+        wf = self.match_weight * f
+        d = torch.clamp(weighted_square - 2.0 * torch.mv(frames, wf) + (wf * f).sum(), min=0.0)
         length = length[:k]
         cost = torch.where(length > 0, cost[:k], torch.full_like(d, self.match_none))
         none1 = torch.full((1,), self.match_none)
@@ -369,13 +488,16 @@ class PathShapeKernelPolicy(nn.Module):
         diag_length = torch.where(position > 0, torch.cat([zero1, length[:-1]]), torch.zeros_like(d))
         skip = torch.where(position > 1, torch.cat([none1, none1, cost[:-2]])[:k], torch.full_like(d, self.match_none))
         skip_length = torch.cat([zero1, zero1, length[:-2]])[:k]
-        candidates = torch.stack([diag, cost, skip])
-        lengths = torch.stack([diag_length, length, skip_length])
-        pick = torch.argmin((candidates + d) / (lengths + 1.0), 0).view(1, -1)
-        cost = candidates.gather(0, pick).view(-1) + d
-        length = lengths.gather(0, pick).view(-1) + 1.0
+        # The least of the three mean costs, the first on a tie.
+        v_diag = (diag + d) / (diag_length + 1.0)
+        v_stay = (cost + d) / (length + 1.0)
+        v_skip = (skip + d) / (skip_length + 1.0)
+        pick_diag = (v_diag <= v_stay) & (v_diag <= v_skip)
+        pick_stay = (v_stay <= v_skip) & ~pick_diag
+        cost = torch.where(pick_diag, diag, torch.where(pick_stay, cost, skip)) + d
+        length = torch.where(pick_diag, diag_length, torch.where(pick_stay, length, skip_length)) + 1.0
         mean_cost = cost / length
-        clips = int(clip.max()) + 1
+        clips = int(clip[-1]) + 1  # the clips are numbered in order
         best = torch.full((clips,), self.match_none).scatter_reduce(0, clip, mean_cost, reduce="amin", include_self=True)
         winner = (mean_cost <= best[clip]).to(d.dtype)
         ties = torch.zeros(clips).scatter_add(0, clip, winner)
@@ -414,8 +536,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
                             encoder: Optional[os.PathLike] = None,
                             commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH),
-                            match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU)
-                            ) -> pathlib.Path:
+                            match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
+                            anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
@@ -428,10 +550,11 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
-                                                          encoder_module, tuple(commit), tuple(match)).eval())
+                                                          encoder_module, tuple(commit), tuple(match),
+                                                          anchors, min_gain).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
-        "blend_folds": folds, "blend_rows": rows,
+        "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
         **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
@@ -460,6 +583,12 @@ def make_parser() -> argparse.ArgumentParser:
                    default=[DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU],
                    help="SHARE of the kernel read replaced by the stroke matched against each context clip with a "
                         "time warp (SHARE 0: off)")
+    p.add_argument("--anchors", type=int, default=DEFAULT_ANCHORS,
+                   help="the context steps the kernel read is fitted on, at most (a longer context: that many, "
+                        "spread evenly over it)")
+    p.add_argument("--min-gain", type=float, default=DEFAULT_MIN_GAIN,
+                   help="use a person's kernel read only if the fitted blend removes at least this share of the "
+                        "CCHP's squared error over their own clips")
     p.add_argument("--encoder", default=None,
                    help="a learning.hand_encoder file: the kernel reads the path and shape through it")
     return p
@@ -468,7 +597,8 @@ def make_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
-                                  args.encoder, tuple(args.commit), tuple(args.match))
+                                  args.encoder, tuple(args.commit), tuple(args.match), args.anchors,
+                                  args.min_gain)
     print(f"wrote {out}")
     return 0
 
