@@ -111,6 +111,8 @@ def main():
     args = p.parse_args()
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
+    if args.model != p.get_default("model") and not pathlib.Path(args.model).is_file():
+        p.error(f"--model {args.model}: no such file")  # an untrained stand-in only when nothing is shipped yet
     policy, source = load_or_build(pathlib.Path(args.model))
     cchp = []
     for k in args.lengths:
