@@ -122,9 +122,14 @@ def _check_args(args) -> None:
 
 
 def _resolve_model(args, scenario) -> Path:
+    """--model, else the scenario's policy file for the source's hands (a real hand's, or `policy.model`)."""
     from rtcohand_drake.cell.robot_files import policy_file_path
+    from rtcohand_drake.systems.gestures.registry import policy_model_name, reads_real_hands
 
-    return args.model if args.model is not None else policy_file_path(scenario.policy.model)
+    if args.model is not None:
+        return args.model
+    real = reads_real_hands(args.gesture_source, getattr(args, "gesture_file", None))
+    return policy_file_path(policy_model_name(scenario.policy, real))
 
 
 def _build(args, scenario, meshcat, station=None):

@@ -147,7 +147,7 @@ def test_drawn_hand_video_through_the_whole_diagram(tmp_path, hand_video, contex
                  "--log", str(log_path)]) == 0
     assert "defaults for a webcam" in capsys.readouterr().err
     log = read_run_log(log_path)
-    assert log.gesture_source == "camera"
+    assert log.gesture_source == "camera" and log.model.endswith("cchp_path_shape.pt")  # a real hand's file, no --model
     t, valid, kp = log.gesture_time, log.gesture_valid, log.gesture_keypoints
     assert kp.shape == (len(t), 63) and len(t) >= 72  # the run ends with the video (7.2 s at 10 Hz)
     waving = (t >= 0.3) & (t < WAVE_S)

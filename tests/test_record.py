@@ -50,6 +50,7 @@ def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
                  "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
     text = capsys.readouterr().out
     assert "| Tx+ | 1 |" in text and "| Rz- | 1 |" in text
+    assert "policy cchp_path_shape.pt" in text  # a recording is a real person's: the file for real hands
     gains = {line.split("|")[1].strip(): float(line.split("|")[3]) for line in text.splitlines()
              if line.startswith("| ") and line[2:4] in context_reading.MOTION_NAMES}
     # A stricter threshold, between the weakest and the best read motion, makes some of them weak.

@@ -282,7 +282,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="with --user: the generated population (data.generate --seed; default 0, the benchmark's)")
     p.add_argument("--scenario", default="inspection",
                    help="scenario whose policy settings (model, correction_weight) are checked")
-    p.add_argument("--model", type=Path, default=None, help="exported policy (default: the scenario's)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="exported policy (default: the scenario's; for a real person's clips its file for real "
+                        "hands, policy.real_hand_model)")
     p.add_argument("--correction-weight", type=float, default=None,
                    help="w of the policy's output r + w (mean - r) (default: the scenario's)")
     p.add_argument("--folds", type=int, default=6,
@@ -313,14 +315,19 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
     if args.folds < 2:
         raise InputError("command line: --folds must be >= 2")
     from rtcohand_drake.cell.robot_files import policy_file_path
+    from rtcohand_drake.data.dataset import as_paths, is_generated
     from rtcohand_drake.learning.policy_file import load_policy
     from rtcohand_drake.scenario import load_scenario
+    from rtcohand_drake.systems.gestures.registry import policy_model_name
 
     scenario = load_scenario(args.scenario)
     weight = scenario.policy.correction_weight if args.correction_weight is None else args.correction_weight
     if not 0.0 <= weight <= 1.0:
         raise InputError(f"command line: --correction-weight must be in [0, 1], got {weight}")
-    model = args.model or policy_file_path(scenario.policy.model)
+    # Without --model: the scenario's file for the clips' hands (a real person's clips: the file for
+    # real hands; generated people's: policy.model).
+    real = args.context_file is not None and not all(is_generated(p) for p in as_paths(args.context_file))
+    model = args.model or policy_file_path(policy_model_name(scenario.policy, real))
     module = load_policy(model)
     from rtcohand_drake.data.hand_features import FEATURE_DIM
 

@@ -242,6 +242,19 @@ def _clip_problem(group, split, fps, active_dims, keypoints, velocity, pose, tim
     return None
 
 
+def is_generated(path: str | os.PathLike) -> bool:
+    """True for a dataset file of generated (simulated) people: its root carries the generator's
+    settings (`generator`). A recording, an import of recorded people, or a file that cannot be read
+    is not (reading it reports the problem)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            return "generator" in f.attrs
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError):
+        return False
+
+
 def read_dataset(path: str | os.PathLike) -> list[Clip]:
     """All clips of a dataset file, validated against docs/interfaces.md (the gesture dataset file), in user then clip name order.
 

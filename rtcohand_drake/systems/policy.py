@@ -75,6 +75,12 @@ class Policy:
     rate_hz: float = 10.0
     # Exported TorchScript policy: a path, or a file name inside models/.
     model: str = "cchp_default.pt"
+    # The policy file for a real hand's skeleton, used in place of `model` when the run's gesture
+    # source plays a real hand (the camera; replay and recorded people of a file that is not a
+    # generated population), and by the recorder's and context_reading's check of such a person's
+    # clips (rtcohand_drake.systems.gestures.registry.reads_real_hands). Empty: `model` for every
+    # source. `--model` overrides both.
+    real_hand_model: str = "cchp_path_shape.pt"
     # The twist output is r + w (mean - r), r the context read (attention . the user's own
     # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
     # (rtcohand_drake.systems.policy).

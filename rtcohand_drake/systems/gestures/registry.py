@@ -21,6 +21,9 @@ class GestureSourceEntry:
     summary: str
     factory: str = "from_options"
     uses_policy: bool = True  # False: the source outputs `twist_request` itself (no policy, no filter)
+    # Whose hand it plays: "simulated", "real" (a tracker), or "file" (that of its --gesture-file:
+    # real unless the file is a generated population).
+    hands: str = "simulated"
 
 
 @dc.dataclass
@@ -41,11 +44,11 @@ GESTURE_SOURCES: dict[str, GestureSourceEntry] = {
     "synthetic": GestureSourceEntry("rtcohand_drake.systems.gestures.simulated_person",
                                     "the built-in simulated person, in closed loop (--user, --population-seed)"),
     "replay": GestureSourceEntry("rtcohand_drake.systems.gestures.replay",
-                                 "clips of a dataset file, back to back (--gesture-file, --clip)"),
+                                 "clips of a dataset file, back to back (--gesture-file, --clip)", hands="file"),
     "recorded": GestureSourceEntry("rtcohand_drake.systems.gestures.recorded_person",
                                    "the simulated person's decisions with a recorded person's own held-out "
-                                   "gestures, in closed loop (--gesture-file, --clip PERSON)"),
-    "camera": GestureSourceEntry("rtcohand_drake.systems.gestures.camera", "a live hand tracker"),
+                                   "gestures, in closed loop (--gesture-file, --clip PERSON)", hands="file"),
+    "camera": GestureSourceEntry("rtcohand_drake.systems.gestures.camera", "a live hand tracker", hands="real"),
     "scripted": GestureSourceEntry("rtcohand_drake.systems.scripted_twist",
                                    "the scenario's scripted_motion, straight to the supervisor (no policy)",
                                    uses_policy=False),
@@ -60,3 +63,21 @@ def make_gesture_source(name: str, options, scenario) -> GestureSetup:
     entry = GESTURE_SOURCES[name]
     factory = getattr(importlib.import_module(entry.module), entry.factory)
     return factory(options, scenario)
+
+
+def reads_real_hands(name: str, gesture_file=None) -> bool:
+    """Whether the source `name` plays a real hand's skeleton: a tracker, or a --gesture-file that is
+    not a generated population (`data.dataset.is_generated`). Such a run reads the scenario's
+    `policy.real_hand_model`."""
+    hands = GESTURE_SOURCES[name].hands
+    if hands == "file":
+        from rtcohand_drake.data.dataset import is_generated
+
+        return gesture_file is not None and not is_generated(gesture_file)
+    return hands == "real"
+
+
+def policy_model_name(policy, real_hands: bool) -> str:
+    """The policy file a run reads without --model: `policy.real_hand_model` for a real hand (when
+    set), else `policy.model` (`policy` is a scenario's policy settings)."""
+    return policy.real_hand_model if real_hands and policy.real_hand_model else policy.model

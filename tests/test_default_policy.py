@@ -1,0 +1,61 @@
+"""Which policy file a command reads without --model: the scenario's `policy.model` for simulated
+people, its `policy.real_hand_model` (the file for real hands) for a real hand's skeleton: the camera,
+replay and recorded people of a file that is not a generated population, and the recorder's and
+context_reading's check of a real person's clips."""
+
+import pathlib
+from types import SimpleNamespace
+
+import h5py
+import pytest
+
+from rtcohand_drake.analysis import context_reading
+from rtcohand_drake.data.dataset import is_generated, write_dataset
+from rtcohand_drake.data.population import GeneratorConfig, generate_population
+from rtcohand_drake.errors import run_cli
+from rtcohand_drake.run import _resolve_model
+from rtcohand_drake.scenario import load_scenario
+from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES, policy_model_name, reads_real_hands
+
+MODELS = pathlib.Path(__file__).resolve().parents[1] / "models"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A generated population file, and the same people written as a recording (no generator)."""
+    folder = tmp_path_factory.mktemp("people")
+    people = list(generate_population(GeneratorConfig(), n_users=1, seed=4))
+    generated, recorded = folder / "generated.h5", folder / "recorded.h5"
+    write_dataset(generated, people, generator="{}")
+    write_dataset(recorded, people)
+    return generated, recorded
+
+
+def test_a_real_hand_is_read_by_the_file_for_real_hands_and_a_simulated_one_by_the_default(files):
+    generated, recorded = files
+    assert is_generated(generated) and not is_generated(recorded) and not is_generated(generated.parent / "none.h5")
+    scenario = load_scenario("inspection")
+    assert (scenario.policy.model, scenario.policy.real_hand_model) == ("cchp_default.pt", "cchp_path_shape.pt")
+    expected = {("synthetic", None): "cchp_default.pt", ("camera", None): "cchp_path_shape.pt",
+                ("replay", generated): "cchp_default.pt", ("replay", recorded): "cchp_path_shape.pt",
+                ("recorded", generated): "cchp_default.pt", ("recorded", recorded): "cchp_path_shape.pt"}
+    for (source, gesture_file), name in expected.items():
+        assert reads_real_hands(source, gesture_file) == (name == "cchp_path_shape.pt"), source
+        args = SimpleNamespace(model=None, gesture_source=source, gesture_file=gesture_file)
+        assert _resolve_model(args, scenario) == MODELS / name, (source, gesture_file)
+        assert _resolve_model(SimpleNamespace(model=pathlib.Path("mine.pt"), gesture_source=source,
+                                              gesture_file=gesture_file), scenario) == pathlib.Path("mine.pt")
+    assert {n for n, e in GESTURE_SOURCES.items() if e.hands != "simulated"} == {"camera", "replay", "recorded"}
+    # An empty real_hand_model: one file for every source.
+    assert policy_model_name(SimpleNamespace(model="a.pt", real_hand_model=""), True) == "a.pt"
+
+
+def test_context_reading_checks_a_real_persons_clips_with_the_file_for_real_hands(files, capsys):
+    generated, recorded = files
+    user = "u10"
+    for path, name in ((recorded, "cchp_path_shape.pt"), (generated, "cchp_default.pt")):
+        with h5py.File(path) as f:
+            user = sorted(f["users"])[0]
+        assert run_cli(context_reading.main, ["--context-file", str(path), "--context-user", user, "--folds", "2",
+                                              "--no-progress"]) == 0
+        assert f"policy {name}" in capsys.readouterr().out
