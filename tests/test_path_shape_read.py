@@ -152,7 +152,7 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     apart = np.sort(d[d > 0])
     width = 0.6 * apart[(len(apart) - 1) // 2]
     starts = np.cumsum([0] + [len(x) for x, _ in context])
-    num = den = base = 0.0
+    sums = np.zeros((5, 3))  # per clip: (k - c).(y - c), |k - c|^2, |y - c|^2
     for f in range(3):
         out = [b for b in range(5) if b % 3 == f]
         rows = [b for b in range(5) if b % 3 != f]
@@ -172,19 +172,23 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
                     y_prev, _, h, c, _, _, _ = inner.step_read(torch.from_numpy(x[:FEATURE_DIM]), y_prev, h, c, ikeys,
                                                                ivalues, iz)
                     cchp = y_prev.numpy().astype(np.float64)
-                    num += (kernel[t] - cchp) @ (y_all[span[t]] - cchp)
-                    den += (kernel[t] - cchp) @ (kernel[t] - cchp)
-                    base += (y_all[span[t]] - cchp) @ (y_all[span[t]] - cchp)
+                    sums[b] += [(kernel[t] - cchp) @ (y_all[span[t]] - cchp), (kernel[t] - cchp) @ (kernel[t] - cchp),
+                                (y_all[span[t]] - cchp) @ (y_all[span[t]] - cchp)]
+    num, den, base = sums.sum(0)
     expected = float(np.clip(num / den, 0.0, 1.0))
     assert 0.05 < expected < 0.999  # a blend, not a bound
     assert float(module._blend(keys)) == pytest.approx(expected, abs=2e-4)
-    # The share of the CCHP's squared error over those steps that the blend at A removes.
-    cchp_error = base
-    # |y - (A k + (1 - A) c)|^2 = |y - c|^2 - 2 A (k - c).(y - c) + A^2 |k - c|^2, summed over the steps
-    blend_error = cchp_error - 2 * expected * num + expected ** 2 * den
+    # The gain: the share of the CCHP's squared error over those steps that the blend removes, each of
+    # two halves of the clips (alternate ones) read with the A fitted on the other half:
+    # |y - (A k + (1 - A) c)|^2 = |y - c|^2 - 2 A (k - c).(y - c) + A^2 |k - c|^2, summed over the steps.
+    halves = [sums[0::2].sum(0), sums[1::2].sum(0)]
+    blend_error = 0.0
+    for i in (0, 1):
+        other_a = float(np.clip(halves[1 - i][0] / halves[1 - i][1], 0.0, 1.0))
+        blend_error += halves[i][2] - 2 * other_a * halves[i][0] + other_a ** 2 * halves[i][1]
     used, fitted, gain = (float(v) for v in module.blend_choice(keys))
     assert used == fitted == pytest.approx(expected, abs=2e-4)
-    assert gain == pytest.approx(1.0 - blend_error / cchp_error, abs=2e-4)
+    assert gain == pytest.approx(1.0 - blend_error / base, abs=2e-4)
 
 
 def test_bad_settings_and_wide_inner_files_are_one_line_errors(tmp_path):

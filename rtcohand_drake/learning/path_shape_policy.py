@@ -319,8 +319,10 @@ class PathShapeKernelPolicy(nn.Module):
         the clip (its own mean fed back, z the prior mean), the kernel read from the exact
         leave-fold-out solution of the whole solve over the anchors (Y_S - (M_SS)^-1 (M Y)_S for the
         fold's anchors S). Least squares over every anchor step of `blend_rows` clips spread over the
-        context (every step, when each is an anchor). Returns (A, the share of the CCHP's squared error
-        over those steps that the blend at A removes)."""
+        context (every step, when each is an anchor). Returns (A, the gain): the gain is the share of
+        the CCHP's squared error over those steps that the blend removes, cross-fitted so that it is not
+        flattered by A's own fit: the clips stepped through are taken alternately into two halves, and
+        each half is read with the A fitted on the other."""
         n_rows = x_c.size(0)
         folds = min(self.blend_folds, n_rows)
         counts = m.sum(1)
@@ -331,9 +333,7 @@ class PathShapeKernelPolicy(nn.Module):
         anchor_of[anchor] = torch.arange(a)
         fitted_residual = torch.mm(m_inv, y_anchor)  # (M Y): the full solve's residuals, scaled
         stride = max(1, n_rows // self.blend_rows)
-        num = torch.zeros((), dtype=torch.float64)
-        den = torch.zeros((), dtype=torch.float64)
-        base = torch.zeros((), dtype=torch.float64)
+        sums = torch.zeros(n_rows, 3, dtype=torch.float64)  # per clip: (k - c).(y - c), |k - c|^2, |y - c|^2
         hi = self.inner_hidden
         for f in range(folds):
             out_rows: List[int] = []
@@ -370,14 +370,23 @@ class PathShapeKernelPolicy(nn.Module):
                         if j >= 0:
                             gap = loo[int(row_of[j])] - y_prev.to(torch.float64)
                             miss = y_anchor[j] - y_prev.to(torch.float64)
-                            num += (gap * miss).sum()
-                            den += (gap * gap).sum()
-                            base += (miss * miss).sum()
-        if den <= 0:
+                            sums[b, 0] += (gap * miss).sum()
+                            sums[b, 1] += (gap * gap).sum()
+                            sums[b, 2] += (miss * miss).sum()
+        total = sums.sum(0)
+        if total[1] <= 0:
             return torch.full((), self.kernel_blend, dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64)
-        a_fit = torch.clamp(num / den, 0.0, 1.0)
-        removed = 2.0 * a_fit * num - a_fit * a_fit * den  # base - the blend's squared error
-        return a_fit, removed / torch.clamp(base, min=1e-12)
+        a_fit = torch.clamp(total[0] / total[1], 0.0, 1.0)
+        # The gain, cross-fitted: the stepped clips alternately in two halves, each read with the other's A.
+        stepped = torch.arange(0, n_rows, stride)
+        halves = [sums[stepped[0::2]].sum(0), sums[stepped[1::2]].sum(0)]
+        removed = torch.zeros((), dtype=torch.float64)
+        for i in range(2):
+            other = halves[1 - i]
+            a_other = torch.clamp(other[0] / other[1], 0.0, 1.0) if float(other[1]) > 0 else torch.zeros(
+                (), dtype=torch.float64)
+            removed += 2.0 * a_other * halves[i][0] - a_other * a_other * halves[i][1]
+        return a_fit, removed / torch.clamp(total[2], min=1e-12)
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
         return self._blend_of(self._extras(keys))
@@ -388,8 +397,8 @@ class PathShapeKernelPolicy(nn.Module):
 
     @torch.jit.export
     def blend_choice(self, keys: torch.Tensor) -> torch.Tensor:
-        """[A used, A as fitted, the share of the CCHP's error on the person's own clips the fitted blend
-        removes (-1: not cross-validated)] for encoded keys."""
+        """[A used, A as fitted, the share of the CCHP's squared error over the person's own clips that the
+        blend removes, cross-fitted (-1: not cross-validated)] for encoded keys."""
         extras = self._extras(keys)
         return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 2], extras[self.extra_size - 1]])
 
