@@ -234,7 +234,15 @@ def main_recorded(args) -> int:
         if not o.ok:
             failed.append({"person": person, "condition": c, "run_seed": seed, "attempts": o.attempts,
                            "error": o.error})
-    header = (f"Recorded people of `{path}`; policy file: {args.model or 'the scenario default'}; run seeds "
+    if args.model:
+        chosen = str(args.model)
+    else:  # the run's own choice for this file's hands (run._resolve_model)
+        from rtcohand_drake.scenario import load_scenario
+        from rtcohand_drake.systems.gestures.registry import policy_model_name, reads_real_hands
+
+        policy = load_scenario("inspection").policy
+        chosen = f"the scenario's, {policy_model_name(policy, reads_real_hands('recorded', path))}"
+    header = (f"Recorded people of `{path}`; policy file: {chosen}; run seeds "
               f"{', '.join(map(str, seeds))}; the pause hand sign {'off' if args.no_hand_sign else 'on'}.")
     text, medians = markdown(results, conditions, cap, failed, header)
     text += "\n" + engine_summary(report) + "\n"
