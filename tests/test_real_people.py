@@ -43,15 +43,17 @@ def _stroke(variant: tuple[int, int], essai: int, n: int) -> np.ndarray:
     return _hand()[None] + s[:, None, None] * direction
 
 
-def write_tree(root: pathlib.Path, subjects=SUBJECTS, reps=REPS, n_frames=40) -> pathlib.Path:
+def write_tree(root: pathlib.Path, subjects=SUBJECTS, reps=REPS, n_frames=40, jitter_m=0.0) -> pathlib.Path:
     rows = []
+    rng = np.random.default_rng(9)
     for s in subjects:
         for g in range(1, 15):
             for f in (1, 2):
                 for e in range(1, reps + 1):
                     folder = root / f"gesture_{g}" / f"finger_{f}" / f"subject_{s}" / f"essai_{e}"
                     folder.mkdir(parents=True)
-                    frames = _stroke((g, f), e, n_frames).reshape(n_frames, -1)
+                    frames = (_stroke((g, f), e, n_frames) + rng.normal(scale=jitter_m, size=(n_frames, 22, 3))
+                              ).reshape(n_frames, -1)
                     np.savetxt(folder / "skeletons_world.txt", frames, fmt="%.6f")
                     rows.append(f"{g} {f} {s} {e} {g} {g + 14 * (f - 1)} {n_frames}")
     (root / "train_gestures.txt").write_text("\n".join(rows) + "\n")
@@ -123,6 +125,35 @@ def test_whole_hand_map_makes_every_command_with_the_whole_hand(tree, tmp_path):
     run = _run("rtcohand_drake.data.import_shrec17", "--root", str(tree), "--out", str(tmp_path / "x.h5"),
                "--mapping", "whole-hand", "--subjects", "3")
     assert run.returncode == 0 and "whole-hand map" in run.stdout
+
+
+def test_rest_noise_rests_the_hand_with_the_persons_own_jitter(tmp_path):
+    """--rest-noise: each held frame is the held one plus successive offsets of the person's own
+    jitter where their hand hardly moves (`rest_noise_of`: `hand_features.slow_noise` over their mapped
+    sequences); without it the rest is exactly still."""
+    tree = write_tree(tmp_path / "shrec17", subjects=(3,), reps=2, jitter_m=0.002)
+    still, noisy = tmp_path / "still.h5", tmp_path / "noisy.h5"
+    shrec.import_shrec17(tree, still, "natural", progress=False)
+    shrec.import_shrec17(tree, noisy, "natural", progress=False, rest_noise=True)
+    with h5py.File(noisy) as f:
+        assert "jitter" in json.loads(f.attrs["import"])["rest"]
+    mapped = [q for q in shrec.find_sequences(tree) if q.variant in set(shrec.NATURAL_MAP.values())]
+    pool = shrec.rest_noise_of(mapped)
+    assert len(pool) > 10 and np.abs(pool).max() > 1e-4
+    flat = pool.reshape(len(pool), -1)
+    rest = 15
+    for a, b in zip(read_dataset(still), read_dataset(noisy)):
+        assert a.clip_id == b.clip_id and np.array_equal(a.object_velocity, b.object_velocity)
+        np.testing.assert_array_equal(a.keypoints[rest:-rest], b.keypoints[rest:-rest])  # the gesture as it was
+        assert np.all(a.keypoints[:rest] == a.keypoints[rest])  # still without the option
+        for held, frames in ((a.keypoints[rest], b.keypoints[:rest]), (a.keypoints[-rest - 1], b.keypoints[-rest:])):
+            offsets = (frames - held).reshape(rest, -1)
+            # Successive rows of the pool from some start.
+            runs = [i for i in range(len(pool))
+                    if np.abs(flat[(i + np.arange(rest)) % len(pool)] - offsets).max() < 1e-5]
+            assert runs, "the rest is not successive rows of the person's jitter"
+    run = _run("rtcohand_drake.data.import_shrec17", "--root", str(tree), "--out", str(tmp_path / "x.h5"), "--rest-noise")
+    assert run.returncode == 0, run.stderr
 
 
 def test_axis_map_is_a_proper_rotation():

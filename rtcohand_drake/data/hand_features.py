@@ -301,6 +301,26 @@ def resample(
     return out.reshape((new_times.size,) + vals.shape[1:]).astype(dtype), new_times
 
 
+def tracking_noise(keypoints: np.ndarray, window: int = 5) -> np.ndarray:
+    """(N, 21, 3): each frame's offset from the centred median of `window` frames (0 at the ends):
+    the tracker's jitter about the hand's smoothed path."""
+    n, h = len(keypoints), window // 2
+    out = np.zeros_like(keypoints)
+    if n >= window:
+        stack = np.stack([keypoints[i:n - window + 1 + i] for i in range(window)])
+        out[h:n - h] = keypoints[h:n - h] - np.median(stack, axis=0)
+    return out
+
+
+def slow_noise(keypoints: np.ndarray, fps: float, window: int = 5, below_m_s: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """(`tracking_noise` (N, 21, 3), (N,) bool: the frames whose palm centre, on its smoothed path, moves
+    slower than `below_m_s`): the jitter of a hand that hardly moves."""
+    noise = tracking_noise(keypoints, window)
+    palm = (keypoints[:, PALM_POINTS] - noise[:, PALM_POINTS]).mean(axis=1)
+    speed = np.r_[0.0, np.linalg.norm(np.diff(palm, axis=0), axis=1) * fps]
+    return noise, speed < below_m_s
+
+
 def join_recordings(recordings) -> list[np.ndarray]:
     """Recordings (each (N, 21, 3), NaN where the hand is lost) moved so that each starts where the
     one before ended: its first seen centre (the mean of the 21 keypoints) on the last seen centre

@@ -2,7 +2,7 @@
 
     python -m rtcohand_drake.data.import_shrec17 --root DIR --out FILE.h5
         [--mapping natural|whole-hand|custom] [--subjects S ...] [--seed N] [--group out-sample|in-sample]
-        [--rest-s 0.5] [--ramp-s 0.2]
+        [--rest-s 0.5] [--ramp-s 0.2] [--rest-noise]
 
 DIR is the dataset as it ships (De Smedt et al., "SHREC'17 Track: 3D Hand
 Gesture Recognition Using a Depth and Skeletal Dataset", 3DOR 2017):
@@ -29,7 +29,12 @@ What a recorded person becomes (docs/interfaces.md, recorded people):
   ``X_U = x``, ``Y_U = -z``, ``Z_U = y`` (a proper rotation).
 - **Rest.** The sequences are trimmed to the gesture; the first frame is held
   still for ``rest_s`` before it and the last frame for ``rest_s`` after it,
-  so each clip starts and ends at rest as a recorded clip does.
+  so each clip starts and ends at rest as a recorded clip does. With
+  ``--rest-noise`` the held frames carry the person's own tracking jitter
+  instead of none: successive offsets of their frames from a 5-frame median,
+  taken where the palm moves slower than 0.05 m/s in any of their mapped
+  sequences (`hand_features.slow_noise`), from a point drawn for each rest
+  (seeded by ``--seed`` and the subject), as a tracked hand at rest jitters.
 - **Labels.** Over the gesture's frames the command's twist at the project's
   magnitudes (`TRANSLATION_M_S`, `ROTATION_RAD_S`), ramped linearly over
   ``ramp_s`` at each end inside the gesture; zero over the rests.
@@ -40,7 +45,7 @@ What a recorded person becomes (docs/interfaces.md, recorded people):
   own train clips as context (`rtcohand_drake.data.sampling`).
 
 The map and the labelling are stored in the file: the root attribute
-``import`` (JSON: source, mapping, seed, rest_s, ramp_s, magnitudes, axis map)
+``import`` (JSON: source, mapping, seed, rest_s, ramp_s, rest, magnitudes, axis map)
 and each user's attribute ``command_map`` (JSON: command -> "G<g>F<f>"); each
 clip's ``description`` names its gesture, finger, repetition and command.
 
@@ -183,9 +188,27 @@ def command_labels(n_gesture: int, n_rest: int, dim: int, sign: int, ramp_frames
     return y
 
 
-def with_rest(keypoints: np.ndarray, n_rest: int) -> np.ndarray:
-    """The first frame held for n_rest frames before, the last after."""
-    return np.concatenate([np.repeat(keypoints[:1], n_rest, 0), keypoints, np.repeat(keypoints[-1:], n_rest, 0)])
+def with_rest(keypoints: np.ndarray, n_rest: int, noise: np.ndarray | None = None,
+              rng: np.random.Generator | None = None) -> np.ndarray:
+    """The first frame held for n_rest frames before, the last after; with `noise` (M, 21, 3), each
+    held run plus M's successive offsets from a point drawn by `rng`."""
+    before, after = np.repeat(keypoints[:1], n_rest, 0), np.repeat(keypoints[-1:], n_rest, 0)
+    if noise is not None and len(noise) and n_rest:
+        for held in (before, after):
+            held += noise[(int(rng.integers(len(noise))) + np.arange(n_rest)) % len(noise)]
+    return np.concatenate([before, keypoints, after])
+
+
+def rest_noise_of(sequences: Sequence[Sequence17]) -> np.ndarray:
+    """(M, 21, 3) a person's tracking jitter where their hand hardly moves, over their sequences."""
+    from rtcohand_drake.data.hand_features import slow_noise
+
+    parts = []
+    for q in sequences:
+        noise, slow = slow_noise(to_user_frame(read_skeletons(q.path)), FPS)
+        parts.append(noise[slow])
+    noise = np.concatenate(parts) if parts else np.zeros((0, 21, 3))
+    return noise[np.all(np.isfinite(noise), axis=(1, 2))]
 
 
 def command_map(mapping: str, variants: Sequence[tuple[int, int]], subject: int, seed: int
@@ -202,8 +225,10 @@ def command_map(mapping: str, variants: Sequence[tuple[int, int]], subject: int,
 
 
 def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, int]], user: str, group: str,
-                 rest_s: float, ramp_s: float) -> list[Clip]:
-    """One person's clips: each mapped variant's repetitions, the last one held out (split "test")."""
+                 rest_s: float, ramp_s: float, noise: np.ndarray | None = None,
+                 rng: np.random.Generator | None = None) -> list[Clip]:
+    """One person's clips: each mapped variant's repetitions, the last one held out (split "test");
+    with `noise`, the rests carry it (`with_rest`)."""
     n_rest = int(round(rest_s * FPS))
     ramp = int(round(ramp_s * FPS))
     clips = []
@@ -216,7 +241,7 @@ def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, 
             g, f = variant
             clips.append(Clip(
                 user=user, clip_id=f"g{g:02d}f{f}e{q.essai:02d}", group=group, split=split,
-                active_dims=np.array([dim]), fps=FPS, keypoints=with_rest(kp, n_rest).astype(np.float32),
+                active_dims=np.array([dim]), fps=FPS, keypoints=with_rest(kp, n_rest, noise, rng).astype(np.float32),
                 object_velocity=command_labels(len(kp), n_rest, dim, sign, ramp).astype(np.float32),
                 description=f"{GESTURES[g - 1]}, {FINGERS[f - 1]}, repetition {q.essai} -> {name}"))
     return sorted(clips, key=lambda c: c.clip_id)
@@ -224,7 +249,7 @@ def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, 
 
 def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Sequence[int] | None = None,
                    seed: int = 0, group: str = "out-sample", rest_s: float = 0.5, ramp_s: float = 0.2,
-                   progress: bool = True) -> dict:
+                   progress: bool = True, rest_noise: bool = False) -> dict:
     """Write `out` from the dataset under `root`; returns a summary (people, clips, held out)."""
     if mapping not in MAPPINGS:
         raise InputError(f"unknown mapping {mapping!r} (expected one of {', '.join(MAPPINGS)})")
@@ -248,9 +273,14 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
         user = f"s{s:02d}"
         cmap = command_map(mapping, [q.variant for q in own], s, seed)
         maps[user] = {c: f"G{g}F{f}" for c, (g, f) in cmap.items()}
-        clips.extend(person_clips(own, cmap, user, group, rest_s, ramp_s))
+        mapped = [q for q in own if q.variant in set(cmap.values())]
+        noise = rest_noise_of(mapped) if rest_noise else None
+        clips.extend(person_clips(own, cmap, user, group, rest_s, ramp_s, noise,
+                                  np.random.default_rng([int(seed), int(s), 1])))
     meta = {"source": "SHREC'17 track, 3D hand gesture skeletons (De Smedt et al., 3DOR 2017)",
             "mapping": mapping, "seed": int(seed), "rest_s": rest_s, "ramp_s": ramp_s, "fps": FPS,
+            "rest": ("the held frames plus the person's own tracking jitter (--rest-noise)" if rest_noise
+                     else "the first and last frames held still"),
             "translation_m_s": TRANSLATION_M_S, "rotation_rad_s": ROTATION_RAD_S,
             "axis_map": "X_U = x, Y_U = -z, Z_U = y (camera x right, y up, z depth toward the person)",
             "held_out": "the last repetition of each mapped variant (split test); the others are context (train)"}
@@ -273,13 +303,15 @@ def make_parser() -> argparse.ArgumentParser:
                    help="the users' group in the file (default out-sample)")
     p.add_argument("--rest-s", type=float, default=0.5, help="still hand before and after each gesture, s")
     p.add_argument("--ramp-s", type=float, default=0.2, help="label ramp at each end of the gesture, s")
+    p.add_argument("--rest-noise", action="store_true",
+                   help="rest with the person's own tracking jitter, as a tracked hand does (default: held still)")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     summary = import_shrec17(args.root, args.out, args.mapping, args.subjects, args.seed, args.group,
-                             args.rest_s, args.ramp_s)
+                             args.rest_s, args.ramp_s, rest_noise=args.rest_noise)
     print(f"wrote {args.out}: {summary['people']} people, {summary['clips']} clips, "
           f"{summary['held_out']} held out ({args.mapping} map)")
     return 0

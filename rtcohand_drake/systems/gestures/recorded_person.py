@@ -143,21 +143,11 @@ def _motion_of(clip) -> tuple[int, int] | None:
     return (dim, int(np.sign(total))) if total != 0.0 else None
 
 
-def _tracking_noise(keypoints: np.ndarray, window: int) -> np.ndarray:
-    """(N, 21, 3) each frame's offset from the centred median of `window` frames (0 at the ends)."""
-    n, h = len(keypoints), window // 2
-    out = np.zeros_like(keypoints)
-    if n >= window:
-        stack = np.stack([keypoints[i:n - window + 1 + i] for i in range(window)])
-        out[h:n - h] = keypoints[h:n - h] - np.median(stack, axis=0)
-    return out
-
-
 def load_recorded_person(path, person: str, rate_hz: float, config: RecordedHandConfig | None = None
                          ) -> PersonRecordings:
     """A person's held-out recordings and tracking noise from a gesture dataset file (module doc)."""
     from rtcohand_drake.data.dataset import read_dataset
-    from rtcohand_drake.data.hand_features import resample
+    from rtcohand_drake.data.hand_features import resample, slow_noise
 
     config = config or RecordedHandConfig()
     everyone = read_dataset(path)
@@ -175,12 +165,10 @@ def load_recorded_person(path, person: str, rate_hz: float, config: RecordedHand
             continue
         kp = c.keypoints.astype(float)
         step = max(1, int(round(c.fps / rate_hz)))
-        noise = _tracking_noise(kp, config.noise_window)
+        noise, slow = slow_noise(kp, c.fps, config.noise_window, config.still_speed_m_s)
         moving = np.abs(c.object_velocity).sum(axis=1) > 0
         rest_noise.append(noise[~moving][::step])
-        palm = kp[:, list(PALM)].mean(axis=1) - noise[:, list(PALM)].mean(axis=1)  # the palm's smoothed path
-        speed = np.r_[0.0, np.linalg.norm(np.diff(palm, axis=0), axis=1) * c.fps]
-        still_noise.append(noise[moving & (speed < config.still_speed_m_s)][::step])
+        still_noise.append(noise[moving & slow][::step])
         k0, k1 = np.flatnonzero(moving)[[0, -1]]
         times = c.times[k0:k1 + 1]
         kq, _ = resample(kp[k0:k1 + 1], times, rate_hz)
