@@ -145,7 +145,9 @@ def test_drawn_hand_video_through_the_whole_diagram(tmp_path, hand_video, contex
     assert main(["--scenario", "inspection", "--gesture-source", "camera", "--video", str(hand_video),
                  "--context-file", str(context_file), "--realtime-rate", "0", "--no-meshcat",
                  "--log", str(log_path)]) == 0
-    assert "defaults for a webcam" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "defaults for a webcam" in printed.err
+    assert "gesture source camera, policy cchp_path_shape.pt:" in printed.out  # the run says which file read the hand
     log = read_run_log(log_path)
     assert log.gesture_source == "camera" and log.model.endswith("cchp_path_shape.pt")  # a real hand's file, no --model
     t, valid, kp = log.gesture_time, log.gesture_valid, log.gesture_keypoints
