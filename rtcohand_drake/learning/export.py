@@ -87,6 +87,37 @@ def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Ten
     return flat[: k * d].view(k, d), flat[k * d : start].view(d, d), flat[start : start + d * m].view(d, m)
 
 
+class WrappedPolicySteps(nn.Module):
+    """The exported steps of a policy file that wraps an exported CCHP policy and adds a read of its own
+    (`learning.path_shape_policy`, `learning.ridge_blend_policy`): the subclass defines `_step(x_t, h, c,
+    keys, values, z) -> (mean, std, h, c, read [1, 6], v [1], query)` and `attention_of(query, keys)`;
+    `y_prev` is not used (such a file carries the CCHP's own mean in h)."""
+
+    @torch.jit.export
+    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                             torch.Tensor, torch.Tensor]:
+        """(mean, std, h, c, read [1, 6], v [1], query [query_size]); `y_prev` is not used (the
+        CCHP's own mean is carried in h)."""
+        return self._step(x_t, h, c, keys, values, z)
+
+    @torch.jit.export
+    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
+                                      torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys), v
+
+    @torch.jit.export
+    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
+             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
+             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
+        return mean, std, h2, c2, self.attention_of(query, keys)
+
+
 class CchpPolicy(nn.Module):
     """The deployable CCHP: context encoding once, then one cheap step per frame."""
 

@@ -77,6 +77,7 @@ from torch import nn
 
 from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
 from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.learning.export import WrappedPolicySteps
 
 # Chosen on the 10 recorded development people (docs/real_people.md, section 3).
 DEFAULT_BLEND = 0.75
@@ -112,7 +113,7 @@ DEFAULT_MIN_GAIN = 0.0
 MATCH_NONE = 1e18  # the cost of a match that cannot be made
 
 
-class PathShapeKernelPolicy(nn.Module):
+class PathShapeKernelPolicy(WrappedPolicySteps):
     """The exported CCHP policy (first 36 features) blended with a kernel read of the path and shape."""
 
     def __init__(self, inner: torch.jit.ScriptModule, blend: float, bandwidth: float, lam: float,
@@ -514,30 +515,6 @@ class PathShapeKernelPolicy(nn.Module):
         read = (w.view(-1, 1) * labels).sum(0) / w.sum()
         pad = torch.zeros(self.match_max_steps - k)
         return read, torch.cat([cost, pad]), torch.cat([length, pad])
-
-    @torch.jit.export
-    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                             torch.Tensor, torch.Tensor]:
-        """(mean, std, h, c, read [1, 6], v [1], query [query_size]); `y_prev` is not used (the
-        CCHP's own mean is carried in h)."""
-        return self._step(x_t, h, c, keys, values, z)
-
-    @torch.jit.export
-    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                                      torch.Tensor]:
-        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
-        return mean, std, h2, c2, self.attention_of(query, keys), v
-
-    @torch.jit.export
-    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
-        return mean, std, h2, c2, self.attention_of(query, keys)
 
 
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,

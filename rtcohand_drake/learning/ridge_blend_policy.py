@@ -37,10 +37,10 @@ import warnings
 from typing import List, Optional, Sequence, Tuple
 
 import torch
-from torch import nn
 
 from rtcohand_drake.data.hand_features import FEATURE_DIM
 from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.learning.export import WrappedPolicySteps
 
 # The per-person ridge reference's settings (learning.ridge_reference, the `evaluate --ridge` default);
 # the folds and rows as the file for real hands chooses its blend (learning.path_shape_policy).
@@ -50,7 +50,7 @@ DEFAULT_FOLDS = 4
 DEFAULT_ROWS = 12
 
 
-class RidgeBlendPolicy(nn.Module):
+class RidgeBlendPolicy(WrappedPolicySteps):
     """The exported CCHP policy blended, per person, with a ridge read of their own clips."""
 
     def __init__(self, inner: torch.jit.ScriptModule, window: int = DEFAULT_WINDOW, lam: float = DEFAULT_LAMBDA,
@@ -202,30 +202,6 @@ class RidgeBlendPolicy(nn.Module):
         h_next = torch.cat([h2, mean_i, window[self.feature_dim:]])
         c_next = torch.cat([c2, torch.zeros(6 + (self.window - 1) * self.feature_dim)])
         return mean, std, h_next, c_next, read, v, query
-
-    @torch.jit.export
-    def step_read(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-                  keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-                  ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                             torch.Tensor, torch.Tensor]:
-        """(mean, std, h, c, read [1, 6], v [1], query [query_size]); `y_prev` is not used (the
-        CCHP's own mean is carried in h)."""
-        return self._step(x_t, h, c, keys, values, z)
-
-    @torch.jit.export
-    def step_with_variance(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-                           keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-                           ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                                      torch.Tensor]:
-        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
-        return mean, std, h2, c2, self.attention_of(query, keys), v
-
-    @torch.jit.export
-    def step(self, x_t: torch.Tensor, y_prev: torch.Tensor, h: torch.Tensor, c: torch.Tensor,
-             keys: torch.Tensor, values: torch.Tensor, z: torch.Tensor
-             ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        mean, std, h2, c2, _, v, query = self._step(x_t, h, c, keys, values, z)
-        return mean, std, h2, c2, self.attention_of(query, keys)
 
 
 def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int = DEFAULT_WINDOW,
