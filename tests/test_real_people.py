@@ -138,7 +138,7 @@ def test_rest_noise_rests_the_hand_with_the_persons_own_jitter(tmp_path):
     with h5py.File(noisy) as f:
         assert "jitter" in json.loads(f.attrs["import"])["rest"]
     mapped = [q for q in shrec.find_sequences(tree) if q.variant in set(shrec.NATURAL_MAP.values())]
-    pool = shrec.rest_noise_of(mapped)
+    pool = shrec.rest_noise_of(shrec.to_user_frame(shrec.read_skeletons(q.path)) for q in mapped)
     assert len(pool) > 10 and np.abs(pool).max() > 1e-4
     flat = pool.reshape(len(pool), -1)
     rest = 15

@@ -61,7 +61,7 @@ import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -199,13 +199,14 @@ def with_rest(keypoints: np.ndarray, n_rest: int, noise: np.ndarray | None = Non
     return np.concatenate([before, keypoints, after])
 
 
-def rest_noise_of(sequences: Sequence[Sequence17]) -> np.ndarray:
-    """(M, 21, 3) a person's tracking jitter where their hand hardly moves, over their sequences."""
+def rest_noise_of(keypoints: Iterable[np.ndarray]) -> np.ndarray:
+    """(M, 21, 3) a person's tracking jitter where their hand hardly moves, over their sequences'
+    keypoints (each (T, 21, 3) in U, in turn)."""
     from rtcohand_drake.data.hand_features import slow_noise
 
     parts = []
-    for q in sequences:
-        noise, slow = slow_noise(to_user_frame(read_skeletons(q.path)), FPS)
+    for kp in keypoints:
+        noise, slow = slow_noise(kp, FPS)
         parts.append(noise[slow])
     noise = np.concatenate(parts) if parts else np.zeros((0, 21, 3))
     return noise[np.all(np.isfinite(noise), axis=(1, 2))]
@@ -225,18 +226,22 @@ def command_map(mapping: str, variants: Sequence[tuple[int, int]], subject: int,
 
 
 def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, int]], user: str, group: str,
-                 rest_s: float, ramp_s: float, noise: np.ndarray | None = None,
+                 rest_s: float, ramp_s: float, rest_noise: bool = False,
                  rng: np.random.Generator | None = None) -> list[Clip]:
     """One person's clips: each mapped variant's repetitions, the last one held out (split "test");
-    with `noise`, the rests carry it (`with_rest`)."""
+    with `rest_noise`, the rests carry the person's jitter (`rest_noise_of` over their mapped
+    sequences in order, `with_rest`), drawn by `rng`."""
     n_rest = int(round(rest_s * FPS))
     ramp = int(round(ramp_s * FPS))
+    mapped = [q for q in sequences if q.variant in set(mapping.values())]
+    skeletons = {q.path: to_user_frame(read_skeletons(q.path)) for q in mapped}  # each file read once
+    noise = rest_noise_of(skeletons[q.path] for q in mapped) if rest_noise else None
     clips = []
     for name, variant in mapping.items():
         dim, sign = COMMANDS[COMMAND_NAMES.index(name)]
         reps = sorted((q for q in sequences if q.variant == variant), key=lambda q: q.essai)
         for q in reps:
-            kp = to_user_frame(read_skeletons(q.path))
+            kp = skeletons[q.path]
             split = "test" if (q is reps[-1] and len(reps) > 1) else "train"
             g, f = variant
             clips.append(Clip(
@@ -273,9 +278,7 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
         user = f"s{s:02d}"
         cmap = command_map(mapping, [q.variant for q in own], s, seed)
         maps[user] = {c: f"G{g}F{f}" for c, (g, f) in cmap.items()}
-        mapped = [q for q in own if q.variant in set(cmap.values())]
-        noise = rest_noise_of(mapped) if rest_noise else None
-        clips.extend(person_clips(own, cmap, user, group, rest_s, ramp_s, noise,
+        clips.extend(person_clips(own, cmap, user, group, rest_s, ramp_s, rest_noise,
                                   np.random.default_rng([int(seed), int(s), 1])))
     meta = {"source": "SHREC'17 track, 3D hand gesture skeletons (De Smedt et al., 3DOR 2017)",
             "mapping": mapping, "seed": int(seed), "rest_s": rest_s, "ramp_s": ramp_s, "fps": FPS,
