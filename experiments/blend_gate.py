@@ -1,12 +1,13 @@
-"""Which people a policy file with the path-and-shape read should read with its kernel read: a sweep of
-`path_shape_policy --min-gain` on development people.
+"""Which people a policy file that blends a read fitted to the person should read with it: a sweep of
+`--min-gain` (`path_shape_policy`, `ridge_blend_policy`) on development people.
 
     python experiments/blend_gate.py --data POPULATION.h5 --file FILE.pt [--core models/cchp_default.pt]
         [--every 8] [--gates 0 0.02 0.05 0.1 0.2] [--out FILE.json]
 
-FILE must be built with `--min-gain 0` (A as fitted for everyone). Each chosen episode is stepped
-with FILE and with its CCHP alone (`learning.evaluate.stepped_policy_mse`); the file's mean is linear
-in A (the CCHP is fed its own mean), so the read with A = 0 is the CCHP's. For each gate G the
+FILE must be built with `--min-gain 0` (the blend as fitted for everyone), over CORE (the CCHP, or
+for a ridge blend the file it wraps). Each chosen episode is stepped with FILE and with CORE alone
+(`learning.evaluate.stepped_policy_mse`); the file's mean is linear in its blend (the inner file is
+fed its own mean), so the read with blend 0 is CORE's. For each gate G the
 person's read is FILE's where the fitted blend removed at least G of the CCHP's error over their own
 clips (`blend_choice`), else the CCHP's. Prints each gate's share of the zero twist's error.
 """
@@ -23,6 +24,7 @@ import numpy as np
 def main(argv=None) -> int:
     import torch
 
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.data.sampling import evaluation_episodes, pack_context
     from rtcohand_drake.learning.evaluate import stepped_policy_mse
     from rtcohand_drake.learning.policy_file import load_policy
@@ -48,7 +50,8 @@ def main(argv=None) -> int:
         used, fitted, gain = (float(v) for v in wide.blend_choice(keys))
         rows.append({"episode": i, "a_used": used, "a_fitted": fitted, "gain": gain,
                      "zero": float(np.mean(np.asarray(e_n.target.labels, np.float64) ** 2)),
-                     "core": stepped_policy_mse(core, [e_n])["mse"], "file": stepped_policy_mse(wide, [e_w])["mse"]})
+                     "core": stepped_policy_mse(core, [e_w if int(core.feature_dim) > FEATURE_DIM else e_n])["mse"],
+                     "file": stepped_policy_mse(wide, [e_w])["mse"]})
         r = rows[-1]
         print(f"  episode {i}: A {fitted:.3f}, gain {gain:.3f}; core {r['core'] / r['zero']:.3f}, "
               f"file {r['file'] / r['zero']:.3f}", flush=True)

@@ -43,12 +43,13 @@ def _linear_person(rng, n_clips=12, steps=30, window=3):
     return pieces
 
 
-def _numpy_blend(inner, pieces, window, lam, folds, rows):
-    """B as the module docstring defines it, written out: clip b in fold b mod F, read with the
-    other folds' clips as context by the CCHP (stepped, its own mean fed back, z the prior mean)
-    and by the ridge fitted on them; least squares over every step of every stride-th clip."""
+def _numpy_sums(inner, pieces, window, lam, folds, rows):
+    """Per clip (gap . miss, |gap|^2, |miss|^2) as the module docstring defines them, written out: clip b
+    in fold b mod F, read with the other folds' clips as context by the CCHP (stepped, its own mean fed
+    back, z the prior mean) and by the ridge fitted on them; gap = ridge - CCHP, miss = label - CCHP,
+    over every step of every stride-th clip (other clips' rows zero)."""
     stride = max(1, len(pieces) // rows)
-    num = den = 0.0
+    sums = np.zeros((len(pieces), 3))
     for f in range(min(folds, len(pieces))):
         inside = [p for b, p in enumerate(pieces) if b % folds != f]
         ridge = RidgeReference(window, lam).fit(inside)
@@ -58,10 +59,29 @@ def _numpy_blend(inner, pieces, window, lam, folds, rows):
             if b % folds != f or b % stride:
                 continue
             own = _stepped(inner, x, keys, values, z)
-            gap = ridge.predict(x) - own
-            num += float((gap * (y - own)).sum())
-            den += float((gap * gap).sum())
-    return float(np.clip(num / den, 0.0, 1.0))
+            gap, miss = ridge.predict(x) - own, y - own
+            sums[b] = [(gap * miss).sum(), (gap * gap).sum(), (miss * miss).sum()]
+    return sums, stride
+
+
+def _numpy_blend(inner, pieces, window, lam, folds, rows):
+    """B: the least-squares blend over the stepped clips."""
+    sums, _ = _numpy_sums(inner, pieces, window, lam, folds, rows)
+    return float(np.clip(sums[:, 0].sum() / sums[:, 1].sum(), 0.0, 1.0))
+
+
+def _numpy_gain(inner, pieces, window, lam, folds, rows):
+    """The share of the CCHP's squared error the blend removes, cross-fitted: the stepped clips taken
+    alternately into two halves, each read with the B of the other half."""
+    sums, stride = _numpy_sums(inner, pieces, window, lam, folds, rows)
+    stepped = np.arange(0, len(pieces), stride)
+    halves = [sums[stepped[0::2]].sum(0), sums[stepped[1::2]].sum(0)]
+    removed = 0.0
+    for i in (0, 1):
+        b = float(np.clip(halves[1 - i][0] / halves[1 - i][1], 0.0, 1.0))
+        miss_after = halves[i][2] - 2 * b * halves[i][0] + b * b * halves[i][1]  # |miss - b gap|^2
+        removed += halves[i][2] - miss_after
+    return removed / sums[:, 2].sum()
 
 
 def test_the_blend_reads_as_its_definition(tmp_path):
@@ -74,7 +94,9 @@ def test_the_blend_reads_as_its_definition(tmp_path):
     b = float(blend.blend_of(keys))
     assert b == pytest.approx(_numpy_blend(inner, pieces, 3, 5.0, 3, 4), abs=2e-4)
     inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
-    assert torch.equal(keys[:, -inner_keys.shape[1]:], inner_keys) and torch.equal(values, inner_values)
+    # The keys' memory starts with the inner file's keys, as they are.
+    k, d_in = inner_keys.shape
+    assert torch.equal(keys.reshape(-1)[:k * d_in].view(k, d_in), inner_keys) and torch.equal(values, inner_values)
     target, _ = _linear_person(rng, n_clips=1)[0]
     expected = (b * RidgeReference(3, 5.0).fit(pieces).predict(target)
                 + (1.0 - b) * _stepped(inner, target, inner_keys, inner_values, inner_z))
@@ -111,3 +133,28 @@ def test_building_on_a_blended_file_or_bad_settings_is_one_line(tmp_path):
         run = subprocess.run(cli + args + ["--out", str(tmp_path / "x.pt")], capture_output=True, text=True)
         assert run.returncode == 2, run.stderr
         assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
+
+
+def test_the_ridge_is_used_only_for_a_person_it_reads_better(tmp_path):
+    """`--min-gain G`: B as fitted where the blend removes at least G of the inner read's squared error
+    over the person's own clips, cross-fitted (checked against its definition written out); else B = 0
+    and the file reads the person exactly as the inner file does."""
+    rng = np.random.default_rng(2)
+    pieces = _linear_person(rng, n_clips=8)
+    inner = load_policy(CORE)
+    gain = _numpy_gain(inner, pieces, 3, 5.0, 3, 4)
+    assert 0.2 < gain < 0.99  # a linear person: the ridge reads them far better
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+    target, _ = _linear_person(rng, n_clips=1)[0]
+    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
+    alone = _stepped(inner, target, inner_keys, inner_values, inner_z)
+    for min_gain, used in ((gain - 0.05, True), (min(gain + 0.05, 0.999), False)):
+        blend = load_policy(rbp.build_ridge_blend_policy(CORE, tmp_path / f"b{used}.pt", window=3, lam=5.0, folds=3,
+                                                         rows=4, min_gain=min_gain))
+        keys, values, z, _ = blend.encode_context(x_c, y_c, mask)
+        b_used, b_fitted, b_gain = (float(v) for v in blend.blend_choice(keys))
+        assert b_gain == pytest.approx(gain, abs=1e-3)
+        assert b_fitted == pytest.approx(_numpy_blend(inner, pieces, 3, 5.0, 3, 4), abs=2e-4)
+        assert b_used == (b_fitted if used else 0.0)
+        if not used:
+            np.testing.assert_allclose(_stepped(blend, target, keys, values, z), alone, atol=1e-6)

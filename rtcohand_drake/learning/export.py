@@ -87,6 +87,28 @@ def unpack_blr_keys(keys: torch.Tensor, d: int) -> Tuple[torch.Tensor, torch.Ten
     return flat[: k * d].view(k, d), flat[k * d : start].view(d, d), flat[start : start + d * m].view(d, m)
 
 
+def blend_and_gain(sums: torch.Tensor, stride: int) -> Tuple[torch.Tensor, torch.Tensor]:
+    """The blend of a second read with a base read, fitted per person, and what it gains.
+
+    `sums` (clips, 3): for each clip of the person's context, over its steps, (gap . miss, |gap|^2,
+    |miss|^2), gap = the second read - the base read and miss = the label - the base read, each clip
+    read with the other folds' clips as context; rows other than every `stride`-th are zero (not
+    stepped). Returns (the least-squares blend in [0, 1] over every stepped clip, the gain): the share
+    of the base read's squared error over those clips that the blend removes, cross-fitted so that it
+    is not flattered by the blend's own fit: the stepped clips are taken alternately into two halves,
+    and each half is read with the blend fitted on the other. The caller checks |gap|^2 > 0."""
+    total = sums.sum(0)
+    fitted = torch.clamp(total[0] / total[1], 0.0, 1.0)
+    stepped = torch.arange(0, sums.size(0), stride)
+    halves = [sums[stepped[0::2]].sum(0), sums[stepped[1::2]].sum(0)]
+    removed = torch.zeros((), dtype=sums.dtype)
+    for i in range(2):
+        other = halves[1 - i]
+        blend = torch.clamp(other[0] / other[1], 0.0, 1.0) if float(other[1]) > 0 else torch.zeros((), dtype=sums.dtype)
+        removed += 2.0 * blend * halves[i][0] - blend * blend * halves[i][1]
+    return fitted, removed / torch.clamp(total[2], min=1e-12)
+
+
 class WrappedPolicySteps(nn.Module):
     """The exported steps of a policy file that wraps an exported CCHP policy and adds a read of its own
     (`learning.path_shape_policy`, `learning.ridge_blend_policy`): the subclass defines `_step(x_t, h, c,

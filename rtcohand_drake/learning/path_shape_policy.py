@@ -77,7 +77,7 @@ from torch import nn
 
 from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
 from rtcohand_drake.errors import InputError, run_cli
-from rtcohand_drake.learning.export import WrappedPolicySteps
+from rtcohand_drake.learning.export import WrappedPolicySteps, blend_and_gain
 
 # Chosen on the 10 recorded development people (docs/real_people.md, section 3).
 DEFAULT_BLEND = 0.75
@@ -374,20 +374,9 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                             sums[b, 0] += (gap * miss).sum()
                             sums[b, 1] += (gap * gap).sum()
                             sums[b, 2] += (miss * miss).sum()
-        total = sums.sum(0)
-        if total[1] <= 0:
+        if sums[:, 1].sum() <= 0:
             return torch.full((), self.kernel_blend, dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64)
-        a_fit = torch.clamp(total[0] / total[1], 0.0, 1.0)
-        # The gain, cross-fitted: the stepped clips alternately in two halves, each read with the other's A.
-        stepped = torch.arange(0, n_rows, stride)
-        halves = [sums[stepped[0::2]].sum(0), sums[stepped[1::2]].sum(0)]
-        removed = torch.zeros((), dtype=torch.float64)
-        for i in range(2):
-            other = halves[1 - i]
-            a_other = torch.clamp(other[0] / other[1], 0.0, 1.0) if float(other[1]) > 0 else torch.zeros(
-                (), dtype=torch.float64)
-            removed += 2.0 * a_other * halves[i][0] - a_other * a_other * halves[i][1]
-        return a_fit, removed / torch.clamp(total[2], min=1e-12)
+        return blend_and_gain(sums, stride)
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
         return self._blend_of(self._extras(keys))

@@ -1,7 +1,7 @@
 """A policy file that blends an exported CCHP policy with a ridge read fitted to the person's own clips.
 
     python -m rtcohand_drake.learning.ridge_blend_policy --policy CCHP.pt --out FILE.pt
-        [--window 10] [--lambda 100] [--folds 4] [--rows 12]
+        [--window 10] [--lambda 100] [--folds 4] [--rows 12] [--min-gain G]
 
 Some people are read best by a linear map of their own recent hand motion: their gestures are
 steady and their map from gesture to command is unlike anything the CCHP learned from other
@@ -18,13 +18,20 @@ B is chosen for each person when the context is encoded: the least-squares blend
 over the person's own clips, each clip read with the clips of the other folds as context (clip b
 is in fold b mod F): the CCHP stepped over the clip (its own mean fed back, z the prior mean), the
 ridge fitted on the other folds. Over every step of at most `rows` clips spread over the context.
-With a context of one clip B is 0 (the CCHP alone).
+With a context of one clip B is 0 (the CCHP alone). With `--min-gain G` the ridge is used only for a
+person whose clips the blend reads with at least G less squared error than the inner file alone,
+cross-fitted (`export.blend_and_gain`); for anyone else B = 0 (`blend_choice` gives B, the fitted B
+and that share).
 
 The CCHP is fed its own mean, carried in h after its state; then the last `window` - 1 steps of
 the input. `std`, the read variance and the attention are the CCHP's.
 
-Keys (K, D): [the ridge's mean, spread, W (row-major), mean(Y) and B, row-major over
-ceil(extra_size / K) columns | the CCHP's keys].
+The inner file may read more than the 36 hand-part velocities (the file for real hands,
+`learning.path_shape_policy`, reads the hand's path and shape after them): it is fed every feature,
+the ridge the first 36.
+
+Keys (K, D_in + ceil(extra_size / K)): one block whose memory holds the inner file's keys (K, D_in),
+then the ridge's mean, spread, W (row-major), mean(Y) and B, so that a step reads each as a view.
 """
 
 from __future__ import annotations
@@ -40,7 +47,7 @@ import torch
 
 from rtcohand_drake.data.hand_features import FEATURE_DIM
 from rtcohand_drake.errors import InputError, run_cli
-from rtcohand_drake.learning.export import WrappedPolicySteps
+from rtcohand_drake.learning.export import WrappedPolicySteps, blend_and_gain
 
 # The per-person ridge reference's settings (learning.ridge_reference, the `evaluate --ridge` default);
 # the folds and rows as the file for real hands chooses its blend (learning.path_shape_policy).
@@ -54,16 +61,18 @@ class RidgeBlendPolicy(WrappedPolicySteps):
     """The exported CCHP policy blended, per person, with a ridge read of their own clips."""
 
     def __init__(self, inner: torch.jit.ScriptModule, window: int = DEFAULT_WINDOW, lam: float = DEFAULT_LAMBDA,
-                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS):
+                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS, min_gain: float = 0.0):
         super().__init__()
-        if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
-            raise InputError("the inner policy must read the 36 hand features and have step_read")
-        if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1):
-            raise InputError(f"window must be >= 1, lambda positive, folds >= 0 and rows >= 1; got {window}, {lam}, "
-                             f"{folds}, {rows}")
+        if int(inner.feature_dim) < FEATURE_DIM or not hasattr(inner, "step_read"):
+            raise InputError("the inner policy must read the 36 hand features first and have step_read")
+        if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1 and 0.0 <= min_gain < 1.0):
+            raise InputError(f"window must be >= 1, lambda positive, folds >= 0, rows >= 1 and min_gain in [0, 1); "
+                             f"got {window}, {lam}, {folds}, {rows}, {min_gain}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
-        self.feature_dim = FEATURE_DIM
+        # The inner file reads every feature; the ridge reads the first 36, the hand-part velocities.
+        self.feature_dim = int(inner.feature_dim)
+        self.motion_feature_dim = FEATURE_DIM
         self.window = int(window)
         self.ridge_dim = self.window * FEATURE_DIM
         self.ridge_lambda = float(lam)
@@ -74,16 +83,31 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         self.query_size = int(inner.query_size)
         self.motion_dim = 6
         self.attention_heads = int(inner.attention_heads) if hasattr(inner, "attention_heads") else 1
-        # Extras: the standardisation's mean and spread, W, mean(Y), B.
-        self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 1
+        # A person's ridge read is used only if, over their own clips, the fitted blend removes at least
+        # this share of the inner read's squared error (else B = 0: the inner file alone).
+        self.min_gain = float(min_gain)
+        # Extras: the standardisation's mean and spread, W, mean(Y), B used, B as fitted and its gain.
+        self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 3
 
     def _columns(self, k: int) -> int:
         return (self.extra_size + k - 1) // k
 
+    def _inner_keys(self, keys: torch.Tensor) -> torch.Tensor:
+        """The inner file's keys (K, D_in): the first K x D_in floats of the keys' memory (a view, no copy)."""
+        k = keys.size(0)
+        d_in = keys.size(1) - self._columns(k)
+        return keys.reshape(-1)[:k * d_in].view(k, d_in)
+
+    def _extras(self, keys: torch.Tensor) -> torch.Tensor:
+        """The ridge's part of the keys' memory, after the inner file's keys (a view, no copy)."""
+        k = keys.size(0)
+        start = k * (keys.size(1) - self._columns(k))
+        return keys.reshape(-1)[start:start + self.extra_size]
+
     def _windows(self, x: torch.Tensor) -> torch.Tensor:
         """(T, 36) -> (T, window x 36): each step's last `window` steps, oldest first, zeros before the start."""
         t = x.size(0)
-        padded = torch.cat([torch.zeros(self.window - 1, self.feature_dim, dtype=x.dtype), x])
+        padded = torch.cat([torch.zeros(self.window - 1, self.motion_feature_dim, dtype=x.dtype), x])
         return torch.cat([padded[j:j + t] for j in range(self.window)], 1)
 
     def _rows(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, rows: List[int]
@@ -92,7 +116,8 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         ys: List[torch.Tensor] = []
         for b in rows:
             n = int(m[b].sum())
-            xs.append(self._windows(torch.nan_to_num(x_c[b, :n].to(torch.float64), 0.0, 0.0, 0.0)))
+            xs.append(self._windows(torch.nan_to_num(x_c[b, :n, :self.motion_feature_dim].to(torch.float64),
+                                                     0.0, 0.0, 0.0)))
             ys.append(torch.nan_to_num(y_c[b, :n].to(torch.float64), 0.0, 0.0, 0.0))
         return torch.cat(xs), torch.cat(ys)
 
@@ -121,22 +146,30 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         x, y = self._rows(x_c, y_c, m, list(range(n_rows)))
         mean, spread, w, y_mean = self._fit(x, y)
         blend = torch.zeros(1, dtype=torch.float64)
+        fitted = torch.zeros(1, dtype=torch.float64)
+        gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
         if self.blend_folds > 0 and n_rows > 1:
-            blend = self._cross_validated_blend(x_c, y_c, m).view(1)
+            fitted_b, gain_b = self._cross_validated_blend(x_c, y_c, m)
+            fitted, gain = fitted_b.view(1), gain_b.view(1)
+            blend = fitted if float(gain_b) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
+        # One (K, D_in + ceil(extras / K)) block whose memory is the inner file's keys, then the ridge's
+        # extras: a step reads each as a view, without a copy.
         k = keys_in.size(0)
-        cols = self._columns(k)
-        extras = torch.zeros(k * cols, dtype=torch.float64)
-        extras[:self.extra_size] = torch.cat([mean, spread, w.reshape(-1), y_mean, blend])
-        return torch.cat([extras.view(k, cols).to(keys_in.dtype), keys_in], 1), values, z_mu, z_sigma
+        d_in = keys_in.size(1)
+        flat = torch.zeros(k * (d_in + self._columns(k)), dtype=keys_in.dtype)
+        flat[:k * d_in] = keys_in.reshape(-1)
+        flat[k * d_in:k * d_in + self.extra_size] = torch.cat([mean, spread, w.reshape(-1), y_mean, blend, fitted,
+                                                               gain]).to(keys_in.dtype)
+        return flat.view(k, d_in + self._columns(k)), values, z_mu, z_sigma
 
-    def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
-        """B in [0, 1] (module docstring)."""
+    def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor
+                               ) -> Tuple[torch.Tensor, torch.Tensor]:
+        """(B in [0, 1], its cross-fitted gain) (module docstring; `export.blend_and_gain`)."""
         n_rows = x_c.size(0)
         folds = min(self.blend_folds, n_rows)
         stride = max(1, n_rows // self.blend_rows)
         hi = self.inner_hidden
-        num = torch.zeros((), dtype=torch.float64)
-        den = torch.zeros((), dtype=torch.float64)
+        sums = torch.zeros(n_rows, 3, dtype=torch.float64)  # per clip: gap . miss, |gap|^2, |miss|^2
         for f in range(folds):
             out_rows: List[int] = []
             in_rows: List[int] = []
@@ -161,23 +194,29 @@ class RidgeBlendPolicy(WrappedPolicySteps):
                         torch.nan_to_num(x_c[b, t], 0.0, 0.0, 0.0), y_prev, h, c, keys, values, z)
                     own = y_prev.to(torch.float64)
                     gap = ridge[t] - own
-                    num += (gap * (y[t] - own)).sum()
-                    den += (gap * gap).sum()
-        if den <= 0:
-            return torch.zeros((), dtype=torch.float64)
-        return torch.clamp(num / den, 0.0, 1.0)
+                    miss = y[t] - own
+                    sums[b, 0] += (gap * miss).sum()
+                    sums[b, 1] += (gap * gap).sum()
+                    sums[b, 2] += (miss * miss).sum()
+        if sums[:, 1].sum() <= 0:
+            return torch.zeros((), dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64)
+        return blend_and_gain(sums, stride)
 
     @torch.jit.export
     def blend_of(self, keys: torch.Tensor) -> torch.Tensor:
         """B, from the keys `encode_context` gave."""
-        k = keys.size(0)
-        extras = keys[:, :self._columns(k)].reshape(-1)
-        return extras[self.extra_size - 1]
+        return self._extras(keys)[8 * self.ridge_dim + 6]
+
+    @torch.jit.export
+    def blend_choice(self, keys: torch.Tensor) -> torch.Tensor:
+        """[B used, B as fitted, the share of the inner read's squared error over the person's own clips
+        that the blend removes, cross-fitted (-1: not cross-validated)] for encoded keys."""
+        return self._extras(keys)[8 * self.ridge_dim + 6:8 * self.ridge_dim + 9]
 
     @torch.jit.export
     def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
         """The CCHP's attention over the K context steps."""
-        return self.inner.attention_of(query, keys[:, self._columns(keys.size(0)):])
+        return self.inner.attention_of(query, self._inner_keys(keys))
 
     def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
               values: torch.Tensor, z: torch.Tensor
@@ -185,42 +224,38 @@ class RidgeBlendPolicy(WrappedPolicySteps):
                          torch.Tensor]:
         if x_t.numel() != self.feature_dim:
             raise RuntimeError(f"step: x_t must have {self.feature_dim} features, got {x_t.numel()}")
-        k = keys.size(0)
-        cols = self._columns(k)
         x_t = x_t.view(-1)
         hi = self.inner_hidden
         mean_i, std, h2, c2, read_i, v, query = self.inner.step_read(
-            x_t, h[hi:hi + 6], h[:hi], c[:hi], keys[:, cols:], values, z)
-        extras = keys[:, :cols].reshape(-1)
+            x_t, h[hi:hi + 6], h[:hi], c[:hi], self._inner_keys(keys), values, z)
+        extras = self._extras(keys)
         d = self.ridge_dim
-        window = torch.cat([h[hi + 6:], torch.nan_to_num(x_t, 0.0, 0.0, 0.0)])
+        window = torch.cat([h[hi + 6:], torch.nan_to_num(x_t[:self.motion_feature_dim], 0.0, 0.0, 0.0)])
         xs = (window - extras[:d]) / extras[d:2 * d]
         ridge = torch.mv(extras[2 * d:8 * d].view(d, 6).t(), xs) + extras[8 * d:8 * d + 6]
         b = extras[8 * d + 6]
         mean = b * ridge + (1.0 - b) * mean_i
         read = (b * ridge + (1.0 - b) * read_i.mean(0)).view(1, 6)
-        h_next = torch.cat([h2, mean_i, window[self.feature_dim:]])
-        c_next = torch.cat([c2, torch.zeros(6 + (self.window - 1) * self.feature_dim)])
+        h_next = torch.cat([h2, mean_i, window[self.motion_feature_dim:]])
+        c_next = torch.cat([c2, torch.zeros(6 + (self.window - 1) * self.motion_feature_dim)])
         return mean, std, h_next, c_next, read, v, query
 
 
 def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int = DEFAULT_WINDOW,
-                             lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS
-                             ) -> pathlib.Path:
+                             lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS,
+                             min_gain: float = 0.0) -> pathlib.Path:
     """Writes the blended policy file, its model card extended with the ridge read's settings."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
 
     inner, card = policy_and_card(policy)
-    if int(inner.feature_dim) != FEATURE_DIM:
-        raise InputError(f"{policy}: reads {int(inner.feature_dim)} features; give a 36-feature CCHP policy")
     if "ridge_read" in card:
         raise InputError(f"{policy}: already blends a ridge read; give the CCHP policy it was built from")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows).eval())
+        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows, min_gain).eval())
     card = dict(card, ridge_read={
         "inner_policy": pathlib.Path(policy).name, "window": window, "lambda": lam, "blend_folds": folds,
-        "blend_rows": rows,
+        "blend_rows": rows, "min_gain": min_gain,
         "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; "
                 "blended with the CCHP by B chosen per person by folds of their clips"})
     return save_scripted(scripted, out, card)
@@ -236,12 +271,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--folds", type=int, default=DEFAULT_FOLDS,
                    help="choose the blend per person by this many folds of their clips (0: the CCHP alone)")
     p.add_argument("--rows", type=int, default=DEFAULT_ROWS, help="clips the choice of the blend steps through, at most")
+    p.add_argument("--min-gain", type=float, default=0.0,
+                   help="use a person's ridge read only if the fitted blend removes at least this share of the inner "
+                        "read's squared error over their own clips (cross-fitted)")
     return p
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
-    out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows)
+    out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows, args.min_gain)
     print(f"wrote {out}")
     return 0
 
