@@ -55,7 +55,7 @@ def real_time_factor(scenario, model, duration, repeats):
         source, pieces = make_builtin_person(scenario, seed=seed)
         policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=seed,
                             correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release)
+                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)
         simulator.Initialize()
@@ -85,7 +85,7 @@ def onset_latencies(scenario, model, clips, pieces, mode, traces=None):
     onsets = []
     for clip in clips:
         policy = CchpPolicy(model, pieces, rate, seed=0, correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release)
+                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
         source = ReplayGestureSource([clip], rate)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)

@@ -2,6 +2,7 @@
 
     python benchmarks/closed_loop_read.py --population-seeds 0 2 3 [--scenario S] [--model PATH.pt] [--run-seed 0]
         [--users u10 .. u14] [--correction-weight W] [--intent] [--workers 2 | --address tcp://HOST:8786] [--out DIR]
+    python benchmarks/closed_loop_read.py --logs RUN.h5 ... [--out DIR]
 
 For each out-sample person of each population, the inspection runs in closed
 loop as `python -m rtcohand_drake.run --user U --population-seed N` does,
@@ -14,6 +15,10 @@ has intended nothing for 1 s (the part should be still), and the completion
 time. `--intent` puts
 the intent reference (the intended twist 0.3 s late) in the policy's place:
 its rows read 300 ms and gains of 1, the calibration of the measure.
+
+With `--logs`, the same figures come from run logs already written (`run --log`, the logs of
+`study` and `report_populations.py --closed-loop`; `analysis.closed_loop_read.from_run_log`): a
+simulated person's intended twist, or for a recorded person the label of the frame played.
 
 Writes DIR/closed_loop_read.md and .json. Choose settings on development
 populations (seeds 0-99).
@@ -38,7 +43,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--population-seeds", type=int, nargs="+", required=True)
+    p.add_argument("--population-seeds", type=int, nargs="+", default=None)
+    p.add_argument("--logs", type=Path, nargs="+", default=None,
+                   help="measure these run logs (a simulated or recorded person's runs) instead of running")
     p.add_argument("--scenario", default="inspection", help="built-in scenario name or YAML path")
     p.add_argument("--model", type=Path, default=None, help="a policy file (default: the scenario's)")
     p.add_argument("--run-seed", type=int, default=0, help="the runs' --seed (the people's decision rhythm)")
@@ -49,6 +56,23 @@ def main(argv=None) -> int:
     p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
     p.add_argument("--out", type=Path, default=REPO / "out" / "closed_loop_read")
     args = p.parse_args(argv)
+    if (args.logs is None) == (args.population_seeds is None):
+        p.error("give --population-seeds (run the people) or --logs (measure run logs), not both")
+    if args.logs is not None:
+        from rtcohand_drake.analysis.closed_loop_read import from_run_log
+
+        from rtcohand_drake.errors import InputError
+
+        rows = []
+        for path in args.logs:
+            try:
+                rows.append(from_run_log(path))
+            except InputError as err:
+                print(f"skipped: {err}", file=sys.stderr)
+        if not rows:
+            print("error: no run log could be measured", file=sys.stderr)
+            return 2
+        return _report(args, rows, f"run logs ({len(rows)})", {"logs": [str(p) for p in args.logs]})
     scenario = load_scenario(args.scenario)
     if args.model is not None:
         scenario.policy.model = str(args.model.resolve())
@@ -68,13 +92,17 @@ def main(argv=None) -> int:
             print(f"error: p{o.key[0]}/{o.key[1]} failed after {o.attempts} attempts: {o.error}", file=sys.stderr)
         return 1
     rows = [o.value for o in report.outcomes]
+    what = f"{'intent reference' if args.intent else f'policy {scenario.policy.model}'}, run seed {args.run_seed}"
+    return _report(args, rows, what, {"model": scenario.policy.model, "intent": args.intent, "run_seed": args.run_seed})
+
+
+def _report(args, rows, what: str, header: dict) -> int:
     table = markdown(rows)
     used = np.array([r.gains for r in rows])
     lags = [r.lag_s for r in rows]
     done = [r.completion_s for r in rows if r.completion_s is not None]
     times = [r.completion_s if r.completion_s is not None else np.inf for r in rows]  # not done: the slowest
-    summary = (f"\n{'intent reference' if args.intent else f'policy {scenario.policy.model}'}, run seed "
-               f"{args.run_seed}: {len(done)}/{len(rows)} complete, median completion "
+    summary = (f"\n{what}: {len(done)}/{len(rows)} complete, median completion "
                f"{np.median(times):.1f} s (a run not done counted as the slowest); median lag {np.median(lags) * 1e3:.0f} ms; "
                "median gain per axis " + ", ".join(
                    f"{a} {np.nanmedian(used[:, d]):+.2f}" if np.isfinite(used[:, d]).any() else f"{a} -"
@@ -85,9 +113,8 @@ def main(argv=None) -> int:
     print(table + summary)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "closed_loop_read.md").write_text(table + summary)
-    (args.out / "closed_loop_read.json").write_text(json.dumps(
-        {"model": scenario.policy.model, "intent": args.intent, "run_seed": args.run_seed,
-         "rows": [dc.asdict(r) for r in rows]}, indent=1))
+    (args.out / "closed_loop_read.json").write_text(json.dumps({**header, "rows": [dc.asdict(r) for r in rows]},
+                                                                indent=1))
     return 0
 
 

@@ -47,8 +47,9 @@ def reading(model: str, user: str, seed: int, weight: float | None) -> dict:
     from rtcohand_drake.scenario import load_scenario
 
     w = load_scenario("inspection").policy.correction_weight if weight is None else weight
-    clips = builtin_clips(user, 10.0, seed)
     module = load_policy(model)
+    # A file that reads the hand's path and shape gets it with the 36 (the policy box gives it the same).
+    clips = builtin_clips(user, 10.0, seed, path_shape=int(module.feature_dim) > 36)
     means = held_out_means(module, clips, 6, w)
     reference = held_out_reference_means(clips, 6)
     zero = sum(float((c.labels ** 2).sum()) for c in clips)

@@ -179,7 +179,7 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
               f"read wrongly; record them: {record}", file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release)
+                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time
 

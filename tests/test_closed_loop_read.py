@@ -56,3 +56,35 @@ def test_the_intent_reference_reads_at_gain_one_and_its_own_delay_in_closed_loop
     assert r.still_w_rad_s == pytest.approx(0.0, abs=1e-9) and r.still_moving_share == 0.0
     assert r.completion_s is None and r.duration_s == pytest.approx(15.0)  # 15 s is too short for six faces
     assert "| p0/u12 | not done | 300 ms |" in markdown([r])
+
+
+def test_the_figures_come_from_a_run_log_as_from_the_signals(tmp_path):
+    """`from_run_log`: the policy's output and the command sampled at the gesture's samples, up to the
+    sixth face; the same figures as `read_figures` on the signals written into the log."""
+    from rtcohand_drake.analysis.closed_loop_read import from_run_log
+    from rtcohand_drake.errors import InputError
+    from rtcohand_drake.run_log import RunLog, write_run_log
+
+    n, period = 300, 0.1
+    t = np.arange(n) * period
+    intent = np.zeros((n, 6))
+    for start in range(5, n - 20, 30):
+        intent[start:start + 12, 0] = 0.12
+    output = np.zeros((n, 6))
+    output[3:, 0] = 0.5 * intent[:-3, 0]
+    log = RunLog(model="m.pt", gesture_source="recorded", completed=True, faces_inspected=6, completion_time=20.0,
+                 policy_time=t, policy_mean=output, command_time=t, command_twist=output,
+                 gesture_time=t, gesture_intended=intent, extra_attrs={"seed": 3})
+    (tmp_path / "runs").mkdir()
+    path = write_run_log(tmp_path / "runs" / "s02.h5", log)
+    r = from_run_log(path)
+    keep = t <= 20.0 + 1e-9
+    lag, gains, _, _ = read_figures(intent[keep], output[keep], period)
+    assert r.user == "runs/s02" and r.seed == 3 and r.completion_s == 20.0
+    assert r.lag_s == pytest.approx(lag) == pytest.approx(0.3) and r.gains[0] == pytest.approx(gains[0]) == pytest.approx(0.5)
+    assert "| runs/s02 | 20.0 s | 300 ms | +0.50 |" in markdown([r])
+    short = RunLog(policy_time=t[:3], policy_mean=output[:3], gesture_time=t[:3], gesture_intended=intent[:3])
+    with pytest.raises(InputError, match="too short"):
+        from_run_log(write_run_log(tmp_path / "short.h5", short))
+    with pytest.raises(InputError, match="no intended twist"):
+        from_run_log(write_run_log(tmp_path / "camera.h5", RunLog(policy_time=t, policy_mean=output)))

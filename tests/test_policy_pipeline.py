@@ -175,3 +175,25 @@ def test_truncated_policy_file(tmp_path, policy_file):
     path.write_bytes(policy_file.read_bytes()[: 4000])
     with pytest.raises(PolicyFileError, match="not a TorchScript policy"):
         load_policy(path)
+
+
+def test_the_output_gain_scales_the_twist_and_nothing_else(policy_file, dataset):
+    """`policy.output_gain` G: the box's twist is G times the twist it gives with G = 1, step by step
+    (the module is still fed its own mean, so its state is the same); outside [1, 5] it is an error."""
+    clips = load_policy_clips(dataset)
+    pieces = [(c.features, c.labels) for c in clips[1:4]]
+    boxes = [CchpPolicy(policy_file, pieces, 10.0, seed=2, output_gain=g) for g in (1.0, 2.5)]
+    contexts = [b.CreateDefaultContext() for b in boxes]
+    seen = []
+    for x in clips[0].features[:30]:
+        for box, ctx in zip(boxes, contexts):
+            box.GetInputPort(GESTURE_FEATURES).FixValue(ctx, x)
+            ctx.SetDiscreteState(box.EvalUniquePeriodicDiscreteUpdate(ctx))
+        seen.append([np.array(box.GetOutputPort("policy_mean").Eval(ctx)) for box, ctx in zip(boxes, contexts)])
+    plain, scaled = (np.array(s) for s in zip(*seen))
+    assert np.abs(plain).max() > 1e-3
+    np.testing.assert_allclose(scaled, 2.5 * plain, rtol=1e-12, atol=1e-15)
+    assert load_scenario("inspection").policy.output_gain == 1.0  # the shipped scenario: the policy's own
+    for bad in (0.5, float("nan"), 6.0):
+        with pytest.raises(ValueError, match="output_gain"):
+            CchpPolicy(policy_file, pieces, 10.0, output_gain=bad)

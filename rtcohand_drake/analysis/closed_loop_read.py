@@ -126,7 +126,7 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
     if policy is None:
         policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, rate, seed=seed,
                             correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release)
+                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
     gesture_source = "intent" if policy.HasInputPort(INTENDED_TWIST) else None
     run = build_run_diagram(scenario, source=source, policy=policy, gesture_source=gesture_source)
     simulator = Simulator(run.diagram)
@@ -155,12 +155,45 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
     return ClosedLoopRead(user, population_seed, seed, completion, lag, gains, rest_v, rest_w, root.get_time(), *still)
 
 
+def from_run_log(path, max_lag: int = 8) -> ClosedLoopRead:
+    """The same figures from a run log (`run --log`, a study's logs) of a source that writes the
+    intended twist (a simulated or recorded person; for a recorded person, the label of the frame
+    played): the policy's output and the supervisor's command sampled at the gesture's samples, up
+    to the sixth face or the end of the run. The person is the file's folder and name; the population
+    seed the log's `population_seed` attribute, else -1 (not shown)."""
+    from pathlib import Path
+
+    from rtcohand_drake.errors import InputError
+    from rtcohand_drake.run_log import read_run_log
+
+    log = read_run_log(path)
+    n = len(log.gesture_time)
+    if n == 0 or len(log.gesture_intended) != n or len(log.policy_time) == 0:
+        raise InputError(f"{path}: the run log has no intended twist (a simulated or recorded person's run)")
+    end = log.completion_time if log.completed and np.isfinite(log.completion_time) else np.inf
+    keep = log.gesture_time <= end + 1e-9
+    times = log.gesture_time[keep]
+    at = lambda t, x: np.asarray(x, float)[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
+    intent = np.nan_to_num(np.asarray(log.gesture_intended, float)[keep])
+    output = at(log.policy_time, log.policy_mean)
+    command = at(log.command_time, log.command_twist) if len(log.command_time) else np.zeros_like(output)
+    if len(times) < max_lag + 2:
+        raise InputError(f"{path}: the run lasted {len(times)} policy periods, too short to measure")
+    period = float(np.median(np.diff(times)))
+    lag, gains, rest_v, rest_w = read_figures(intent, output, period, max_lag)
+    still = still_figures(intent, command, period)
+    return ClosedLoopRead(f"{Path(path).parent.name}/{Path(path).stem}", int(log.extra_attrs.get("population_seed", -1)),
+                          int(log.extra_attrs.get("seed", 0)), float(end) if np.isfinite(end) else None, lag, gains,
+                          rest_v, rest_w, float(times[-1]) if len(times) else 0.0, *still)
+
+
 def markdown(rows: list[ClosedLoopRead]) -> str:
     head = ("| person | completion | lag | " + " | ".join(f"gain {a}" for a in AXES)
             + " | rest output v / w | still command v / w (share moving) |\n|---|---|---|" + "---|" * 6 + "---|---|\n")
     fmt = lambda g: "-" if not np.isfinite(g) else f"{g:+.2f}"
     body = "".join(
-        f"| p{r.population_seed}/{r.user} | {f'{r.completion_s:.1f} s' if r.completion_s is not None else 'not done'} "
+        f"| {f'p{r.population_seed}/' if r.population_seed >= 0 else ''}{r.user} | "
+        f"{f'{r.completion_s:.1f} s' if r.completion_s is not None else 'not done'} "
         f"| {r.lag_s * 1e3:.0f} ms | " + " | ".join(fmt(g) for g in r.gains)
         + f" | {r.rest_v_m_s:.3f} m/s / {r.rest_w_rad_s:.3f} rad/s | {r.still_v_m_s:.3f} m/s / "
         f"{r.still_w_rad_s:.3f} rad/s ({r.still_moving_share:.0%}) |\n" for r in rows)

@@ -88,6 +88,10 @@ class Policy:
     # Let go of the command once the hand rests (the rest release, rtcohand_drake.learning.rest_release);
     # false: the output is the policy's own.
     rest_release: bool = True
+    # The output twist is multiplied by this (>= 1): a read that gives only part of each gesture's
+    # command (recorded people in the closed loop: docs/real_people.md, section 8) moves the part
+    # faster. 1 = the policy's own output. The supervisor's limits apply as always.
+    output_gain: float = 1.0
 
 
 def blended_output(mean, read, correction_weight: float) -> np.ndarray:
@@ -102,13 +106,17 @@ def blended_output(mean, read, correction_weight: float) -> np.ndarray:
 
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
-                 correction_weight: float = 1.0, rest_release: bool = True):
+                 correction_weight: float = 1.0, rest_release: bool = True, output_gain: float = 1.0):
         """`model_path`: an exported policy file, or a module already loaded by `load_policy`;
-        `rest_release`: gate the output by the person's rest release (module docstring)."""
+        `rest_release`: gate the output by the person's rest release (module docstring);
+        `output_gain`: the output twist multiplied by it (scenario `policy.output_gain`)."""
         super().__init__()
         if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
             raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
+        if not (np.isfinite(output_gain) and 1.0 <= output_gain <= 5.0):
+            raise ValueError(f"output_gain must be in [1, 5], got {output_gain}")
         self.correction_weight = float(correction_weight)
+        self.output_gain = float(output_gain)
         import torch
 
         torch.set_num_threads(1)  # one cheap step per period; do not compete with the simulator
@@ -244,7 +252,7 @@ class CchpPolicy(LeafSystem):
         still = 0.0 if resumes_changed else self.release.next_count(float(get(self._still)[0]), x[:FEATURE_DIM])
         discrete_state.set_value(self._still, [still])
         mean, std, h, c, read, v, query = self.step(x, y_prev, h, c, z)
-        out = blended_output(mean, read, self.correction_weight) * self.release.gate(still)
+        out = blended_output(mean, read, self.correction_weight) * (self.release.gate(still) * self.output_gain)
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
