@@ -71,7 +71,7 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     x_moving = rr.SCALES * 2.0 * resting.theta
     assert resting.next_count(2.0, x_still) == 3.0 and resting.next_count(2.0, x_moving) == 0.0
     # theta against its definition, written out: 1.5 x the 95th percentile of the rest steps' motion
-    # (none within 2 steps of a label), or a tenth of the median motion of the commanding steps.
+    # (none within 2 steps of a label), or f x the median motion of the commanding steps.
     pieces = _pieces(np.random.default_rng(0))
     x = np.concatenate([p[0] for p in pieces]).astype(np.float64)
     y = np.concatenate([p[1] for p in pieces]).astype(np.float64)
@@ -84,8 +84,26 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
         near[:-s] |= labelled[s:]
     # (steps near a label in the next piece are counted per piece in the module; here the pieces
     # are long enough at rest that the difference is none)
-    theta = max(1.5 * np.quantile(m[~near], 0.95), 0.1 * np.median(m[(np.abs(y) / FULL).max(1) >= 0.2]))
-    assert resting.theta == pytest.approx(theta, rel=1e-6)
+    # f: the largest of 0.5, 0.4, 0.3, 0.2, 0.1 with which the release takes at most 5 % of the labels'
+    # squared size over the person's own clips (the gate over each clip from a still count of 0).
+    jitter, commanding = 1.5 * np.quantile(m[~near], 0.95), np.median(m[(np.abs(y) / FULL).max(1) >= 0.2])
+
+    def harm(theta):
+        taken = 0.0
+        for f, l in pieces:
+            still = np.sqrt(np.mean((f.astype(np.float64) / scales) ** 2, axis=1)) < theta
+            n, gate = 0, []
+            for s_t in still:
+                n = n + 1 if s_t else 0
+                gate.append(1.0 if n <= 1 else 0.0 if n >= 3 else (3 - n) / 2)
+            taken += float((((1.0 - np.array(gate)) ** 2)[:, None] * l.astype(np.float64) ** 2).sum())
+        return taken / (y ** 2).sum()
+
+    floor = next(f for f in (0.5, 0.4, 0.3, 0.2, 0.1) if harm(max(jitter, f * commanding)) <= 0.05)
+    assert resting.floor == floor and resting.theta == pytest.approx(max(jitter, floor * commanding), rel=1e-6)
+    assert resting.harm == pytest.approx(harm(resting.theta), rel=1e-6)
+    if floor < 0.5:  # the next larger floor would take too much
+        assert harm(max(jitter, (floor + 0.1) * commanding)) > 0.05
     # A person whose labels go on over a still hand keeps the policy's output as it is.
     holding = rr.fit_rest_release(_pieces(np.random.default_rng(1), still_label=True))
     assert not holding.on and holding.harm > rr.HARM and holding.gate(10) == 1.0

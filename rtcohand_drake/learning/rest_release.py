@@ -15,11 +15,14 @@ has been still for a few policy steps, and returns to 1 the step the hand moves 
 
 Fitted to each person from their own labelled clips (`fit_rest_release`):
 - theta = max(REST_RATIO x the REST_QUANTILE of m over the context's rest steps (no label of
-  QUIET of the person's size within REST_MARGIN steps), MOTION_FLOOR x the median m over its commanding steps): above the person's
-  own tracking jitter at rest, and well below how they move when they gesture;
-- it is on only if, run over the person's own clips, it would take at most HARM of their labels'
-  squared size away: a person who commands with a still hand (a held posture, or labels that
-  outlast the motion) keeps the policy's output as it is.
+  QUIET of the person's size within REST_MARGIN steps), f x the median m over its commanding steps):
+  above the person's own tracking jitter at rest, and below how they move when they gesture;
+- f is the largest of MOTION_FLOORS with which the release, run over the person's own clips, takes
+  at most HARM of their labels' squared size away: as high as their own gestures allow, so that a
+  resting hand whose jitter or drifting the context does not show (an imported recording whose rest
+  is held exactly still) still reads as rest;
+- it is on only if even the smallest floor keeps within HARM: a person who commands with a still
+  hand (a held posture, or labels that outlast the motion) keeps the policy's output as it is.
 
 The gate only ever scales the command down; it reads the 36 features the policy reads, so a lost
 hand (zeros) counts as still. Everything it remembers is the still count n.
@@ -48,7 +51,9 @@ SCALES = np.where((np.arange(FEATURES) % 6) < 3, LINEAR_M_S, ANGULAR_RAD_S)
 # simulated development population (generator seed 0) (docs/policy.md, the rest release).
 STILL_FROM, STILL_TO = 1, 3  # policy steps still: the gate starts to fall after 1, is 0 after 3 (0.3 s at 10 Hz)
 REST_QUANTILE, REST_RATIO = 0.95, 1.5
-MOTION_FLOOR = 0.1
+# The floors tried, largest first (a share of the person's median motion while commanding). Chosen on
+# the recorded development people in the closed loop (docs/real_people.md, section 8); 0.1 alone before.
+MOTION_FLOORS = (0.5, 0.4, 0.3, 0.2, 0.1)
 REST_MARGIN = 2  # policy steps from any label for a step to count as rest
 QUIET = 0.05  # a label under this share of the person's size on every axis is no label (tracking noise)
 COMMANDING = 0.2  # a label commands when it is at least this share of the person's size on that axis
@@ -71,6 +76,7 @@ class RestRelease:
     still_from: int = STILL_FROM
     still_to: int = STILL_TO
     harm: float = 0.0  # the share of the labels' squared size it takes away on the person's clips
+    floor: float = 0.0  # f, the floor theta was fitted with (module docstring)
     jump: float = float("inf")  # m over this is a jump (module docstring)
 
     def motion(self, x: np.ndarray) -> float:
@@ -130,11 +136,16 @@ def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]]) -> RestRel
     rest, moving = np.concatenate(rest), np.concatenate(moving)
     if rest.size == 0 or moving.size == 0 or not scaled.any():
         return release
-    release.theta = float(max(REST_RATIO * np.quantile(rest, REST_QUANTILE), MOTION_FLOOR * np.median(moving)))
-    release.on = True
-    taken = sum(float((((1.0 - release.gates(f)) ** 2)[:, None] * l ** 2).sum()) for f, l in pieces)
-    release.harm = taken / max(float((y ** 2).sum()), 1e-12)
-    release.on = release.harm <= HARM
+    jitter = REST_RATIO * np.quantile(rest, REST_QUANTILE)
+    for floor in MOTION_FLOORS:  # the largest floor the person's own clips allow (module docstring)
+        release.floor = floor
+        release.theta = float(max(jitter, floor * np.median(moving)))
+        release.on = True
+        taken = sum(float((((1.0 - release.gates(f)) ** 2)[:, None] * l ** 2).sum()) for f, l in pieces)
+        release.harm = taken / max(float((y ** 2).sum()), 1e-12)
+        release.on = release.harm <= HARM
+        if release.on:
+            break
     return release
 
 
