@@ -176,15 +176,15 @@ def from_run_log(path, max_lag: int = 8) -> ClosedLoopRead:
     at = lambda t, x: np.asarray(x, float)[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
     intent = np.nan_to_num(np.asarray(log.gesture_intended, float)[keep])
     output = at(log.policy_time, log.policy_mean)
-    command = at(log.command_time, log.command_twist) if len(log.command_time) else np.zeros_like(output)
     if len(times) < max_lag + 2:
         raise InputError(f"{path}: the run lasted {len(times)} policy periods, too short to measure")
+    command = at(log.command_time, log.command_twist) if len(log.command_time) else np.zeros_like(output)
     period = float(np.median(np.diff(times)))
     lag, gains, rest_v, rest_w = read_figures(intent, output, period, max_lag)
     still = still_figures(intent, command, period)
     return ClosedLoopRead(f"{Path(path).parent.name}/{Path(path).stem}", int(log.extra_attrs.get("population_seed", -1)),
                           int(log.extra_attrs.get("seed", 0)), float(end) if np.isfinite(end) else None, lag, gains,
-                          rest_v, rest_w, float(times[-1]) if len(times) else 0.0, *still)
+                          rest_v, rest_w, float(times[-1]), *still)
 
 
 def markdown(rows: list[ClosedLoopRead]) -> str:
