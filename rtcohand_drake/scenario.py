@@ -199,6 +199,7 @@ def _check_values(s: Scenario, source: str) -> None:
     need(0 < h.thumb_up_within_deg and h.thumb_hysteresis_deg >= 0
          and h.thumb_up_within_deg + h.thumb_hysteresis_deg < 90,
          "hand_sign: need 0 < thumb_up_within_deg, thumb_hysteresis_deg >= 0, their sum < 90")
+    need(0 <= h.axis_from_up_min_deg < 180, "hand_sign: need 0 <= axis_from_up_min_deg < 180")
     for i, seg in enumerate(s.scripted_motion):
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 

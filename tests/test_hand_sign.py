@@ -6,7 +6,8 @@ from pydrake.systems.analysis import Simulator
 
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.interfaces import HAND_SIGN, KEYPOINTS, OPERATOR
-from rtcohand_drake.systems.hand_sign import PauseHandSign, initial_state, openness, sign_step, thumb_elevation_deg
+from rtcohand_drake.systems.hand_sign import (PauseHandSign, axis_from_up_deg, initial_state, openness, sign_step,
+                                              thumb_elevation_deg)
 from rtcohand_drake.systems.hand_sign_config import HandSign
 from rtcohand_drake.vision.drawn_hand import open_hand_U, thumbs_up_U
 
@@ -29,9 +30,22 @@ def _play(script, panel_pause=0.0, config=HandSign()):
     return np.array(out), system.GetOutputPort(HAND_SIGN).Eval(context)
 
 
+def upright_closed_hand(thumb_from_up_deg: float = 15.0) -> np.ndarray:
+    """A closed hand held upright (fingers up, palm forward), its thumb laid along the fingers and
+    pointing up: how recorded grabs and pinches end."""
+    kp = open_hand_U(curl=1.0)
+    a = np.radians(thumb_from_up_deg)
+    along = np.array([np.sin(a), 0.0, np.cos(a)])
+    kp[3], kp[4] = kp[2] + 0.03 * along, kp[2] + 0.055 * along
+    return kp
+
+
 def test_the_two_hands_read_as_intended():
     assert openness(OPEN) > 1.8 and openness(THUMBS_UP) < 1.0
     assert thumb_elevation_deg(THUMBS_UP) < 20.0
+    assert axis_from_up_deg(THUMBS_UP) > 80.0  # the fist on its side
+    upright = upright_closed_hand()
+    assert openness(upright) < 1.0 and thumb_elevation_deg(upright) < 20.0 and axis_from_up_deg(upright) < 10.0
     assert np.isnan(openness(LOST))
 
 
@@ -60,6 +74,29 @@ def test_held_sign_toggles_once_and_short_or_moving_signs_never():
     # A lost hand breaks the hold.
     out, _ = _play([(OPEN, 0.5), (THUMBS_UP, 0.3), (LOST, 0.1), (THUMBS_UP, 0.3), (OPEN, 0.3)])
     assert np.all(out[:, 0] == 0)
+
+
+def test_upright_closed_hand_with_its_thumb_up_is_not_the_sign():
+    # Fingers closed and the thumb up, held still: only the hand's axis, upright, tells it from a
+    # thumbs-up; without that test it pauses.
+    upright = upright_closed_hand()
+    out, sign = _play([(OPEN, 0.5), (upright, 2.0)])
+    assert np.all(out[:, 0] == 0) and sign[2] == 0
+    out, _ = _play([(OPEN, 0.5), (upright, 2.0)], config=HandSign(axis_from_up_min_deg=0.0))
+    assert out[-1, 0] == 1
+    # A thumbs-up tilted 30 deg up (the forearm raised) is still the sign.
+    tilt = np.radians(30.0)
+    c, s_ = np.cos(tilt), np.sin(tilt)
+    axis = THUMBS_UP[9] - THUMBS_UP[0]
+    axis[2] = 0.0
+    axis /= np.linalg.norm(axis)
+    n = np.cross(axis, [0.0, 0.0, 1.0])  # turn about the horizontal line across the fist
+    K = np.array([[0, -n[2], n[1]], [n[2], 0, -n[0]], [-n[1], n[0], 0]])
+    R = np.eye(3) + s_ * K + (1 - c) * K @ K
+    tilted = (THUMBS_UP - THUMBS_UP[0]) @ R.T
+    assert 50.0 < axis_from_up_deg(tilted) < 70.0 and thumb_elevation_deg(tilted) < 35.0
+    out, _ = _play([(OPEN, 0.5), (tilted, 1.0)])
+    assert out[-1, 0] == 1
 
 
 def test_sign_toggles_the_panels_pause():
@@ -91,7 +128,7 @@ def test_no_gesture_of_the_population_makes_the_sign(population):
 
 @pytest.mark.parametrize("key, value, fragment", [
     ("fist_below", 2.0, "fist_below < open_above"), ("hold_s", 0.0, "hold_s"),
-    ("thumb_up_within_deg", 80.0, "sum < 90")])
+    ("thumb_up_within_deg", 80.0, "sum < 90"), ("axis_from_up_min_deg", 180.0, "axis_from_up_min_deg")])
 def test_scenario_checks_the_sign(tmp_path, key, value, fragment):
     from rtcohand_drake.scenario import ScenarioError, load_scenario
 

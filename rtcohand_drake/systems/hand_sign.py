@@ -11,9 +11,13 @@ of them points the thumb up.
 The sign (`rtcohand_drake.systems.hand_sign_config.HandSign`): the four
 fingers closed, openness = mean fingertip distance from the wrist / mean
 knuckle (MCP) distance from the wrist (scale free) below `fist_below`, and
-the thumb (MCP to tip) within `thumb_up_within_deg` of up (+Z of U). The
-hand makes the sign from then until openness rises above `open_above` or the
-thumb leaves `thumb_up_within_deg` + `thumb_hysteresis_deg` (hysteresis). It
+the thumb (MCP to tip) within `thumb_up_within_deg` of up (+Z of U), and the
+fist on its side: the hand's axis (wrist to the middle knuckle) at least
+`axis_from_up_min_deg` from up (a hand held upright as it closes points its
+thumb up too). The hand makes the sign from then until openness rises above
+`open_above`, the thumb leaves `thumb_up_within_deg` + `thumb_hysteresis_deg`
+or the axis comes within `axis_from_up_min_deg` - `thumb_hysteresis_deg` of
+up (hysteresis). It
 must be held still, every point within `max_drift_m` of where it was when
 the hold began, for `hold_s` without a break (a lost hand breaks it). After a toggle the sign
 must end before the next one: a held thumbs-up toggles once. No hand of the
@@ -37,7 +41,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from rtcohand_drake.interfaces import HAND_SIGN, HAND_SIGN_DIM, KEYPOINTS, KEYPOINTS_DIM, OPERATOR, OPERATOR_DIM
 from rtcohand_drake.systems.hand_sign_config import HandSign
 
-TIPS, KNUCKLES, WRIST = [8, 12, 16, 20], [5, 9, 13, 17], 0
+TIPS, KNUCKLES, WRIST, MIDDLE_KNUCKLE = [8, 12, 16, 20], [5, 9, 13, 17], 0, 9
 # State: toggled, sign (0/1), armed (0/1), hold start (s, NaN: none), toggles, openness, the
 # skeleton (63) when the hold began.
 _TOGGLED, _SIGN, _ARMED, _HOLD, _COUNT, _OPEN, _KP = 0, 1, 2, 3, 4, 5, slice(6, 69)
@@ -62,6 +66,14 @@ def thumb_elevation_deg(keypoints: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(d[2] / n, -1.0, 1.0)))) if n > 1e-9 else float("nan")
 
 
+def axis_from_up_deg(keypoints: np.ndarray) -> float:
+    """The hand's axis (wrist to the middle finger's knuckle) angle from up (+Z of U), degrees."""
+    kp = np.asarray(keypoints, float).reshape(21, 3)
+    d = kp[MIDDLE_KNUCKLE] - kp[WRIST]
+    n = np.linalg.norm(d)
+    return float(np.degrees(np.arccos(np.clip(d[2] / n, -1.0, 1.0)))) if n > 1e-9 else float("nan")
+
+
 def initial_state() -> np.ndarray:
     state = np.zeros(STATE_SIZE)
     state[_HOLD] = state[_OPEN] = np.nan
@@ -79,8 +91,10 @@ def sign_step(state: np.ndarray, keypoints: np.ndarray, t: float, config: HandSi
         s[_HOLD] = np.nan
         return s
     held = s[_SIGN] > 0.5
-    thumb_limit = config.thumb_up_within_deg + (config.thumb_hysteresis_deg if held else 0.0)
-    sign = o < (config.open_above if held else config.fist_below) and thumb_elevation_deg(kp) < thumb_limit
+    slack = config.thumb_hysteresis_deg if held else 0.0
+    sign = (o < (config.open_above if held else config.fist_below)
+            and thumb_elevation_deg(kp) < config.thumb_up_within_deg + slack
+            and axis_from_up_deg(kp) >= config.axis_from_up_min_deg - slack)
     s[_SIGN] = 1.0 if sign else 0.0
     # Held still: every point within `max_drift_m` of where it was when the hold began (this
     # tolerates the tracker's jitter; a gesture moves the hand further).
