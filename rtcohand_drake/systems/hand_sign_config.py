@@ -29,8 +29,9 @@ class HandSign:
     # upright as it closes (recorded grabs, pinches and the ends of swipes) points its thumb up
     # too, its axis 20 deg from up (median). Once the sign is made it ends only below this minus
     # `thumb_hysteresis_deg`. Chosen on recorded development people (SHREC'17 subjects 2, 4, 8,
-    # 10, 12, 14, 16, 20, 22, 26): the sign toggled after 111 of their 399 custom clips (49 of 408
-    # whole-hand) without it, 1 (0) with 50 deg (docs/real_people.md, the pause sign).
+    # 10, 12, 14, 16, 20, 22, 26; experiments/pause_sign_scan.py): the sign toggled after 111 of
+    # their 399 custom clips (49 of 408 whole-hand) without it, 2 (0) with 50 deg (docs/real_people.md,
+    # the pause sign).
     axis_from_up_min_deg: float = 50.0
     # While the sign is held every point of the hand must stay within this distance (m) of where
     # it was when the hold began: a hand moving through a gesture is not the sign, the tracker's
