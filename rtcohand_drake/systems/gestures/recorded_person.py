@@ -94,6 +94,18 @@ def blend_hands(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     return out
 
 
+def join_time(a: np.ndarray, b: np.ndarray, config: RecordedHandConfig) -> float:
+    """Seconds for the hand to go from skeleton a to b at the join's speed and turn rate (0 when not finite)."""
+    bones_a = a[1:] - a[list(PARENT[1:])]
+    bones_b = b[1:] - b[list(PARENT[1:])]
+    cos = np.sum(bones_a * bones_b, axis=1) / np.maximum(
+        np.linalg.norm(bones_a, axis=1) * np.linalg.norm(bones_b, axis=1), 1e-12)
+    turn = float(np.nanmax(np.arccos(np.clip(cos, -1.0, 1.0))))
+    distance = float(np.nanmax(np.linalg.norm(b - a, axis=1)))
+    time = max(distance / config.join_speed_m_s, turn / config.join_turn_rad_s)
+    return time if np.isfinite(time) else 0.0
+
+
 def motion_name(motion: tuple[int, int]) -> str:
     return f"{DIMENSIONS[motion[0]]}{'+' if motion[1] > 0 else '-'}"
 
@@ -247,15 +259,7 @@ class RecordedPerson(InspectingPerson):
         s.hand, s.hand_since, s.frame = "join", t, 0
 
     def _join_time(self, a: np.ndarray, b: np.ndarray) -> float:
-        """Seconds for the hand to go from skeleton a to b at the join's speed and turn rate."""
-        bones_a = a[1:] - a[list(PARENT[1:])]
-        bones_b = b[1:] - b[list(PARENT[1:])]
-        cos = np.sum(bones_a * bones_b, axis=1) / np.maximum(
-            np.linalg.norm(bones_a, axis=1) * np.linalg.norm(bones_b, axis=1), 1e-12)
-        turn = float(np.nanmax(np.arccos(np.clip(cos, -1.0, 1.0))))
-        distance = float(np.nanmax(np.linalg.norm(b - a, axis=1)))
-        time = max(distance / self.hand.join_speed_m_s, turn / self.hand.join_turn_rad_s)
-        return time if np.isfinite(time) else 0.0
+        return join_time(a, b, self.hand)
 
     def _to_rest(self, s: RecordedHandState, t: float) -> None:
         s.hand, s.held, s.stroke = "rest", s.keypoints.copy(), None
