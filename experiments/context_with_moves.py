@@ -63,7 +63,9 @@ def main(argv=None) -> int:
             out.append(clip)
         if clip.split == "train":
             last[clip.user] = np.asarray(clip.keypoints[-1], float)
-    write_dataset(args.out, out, generator="experiments/context_with_moves.py")
+    # No `generator` attribute: that would mark the copy as generated people, read with `policy.model`
+    # in place of the file for real hands (`data.dataset.is_generated`).
+    write_dataset(args.out, out, root_attrs={"derived_by": "experiments/context_with_moves.py"})
     added = sum(a.num_frames - b.num_frames for a, b in zip(out, clips))
     print(f"wrote {args.out}: {len(out)} clips of {len({c.user for c in out})} people, {added} frames of moves "
           f"between gestures added to their context clips", flush=True)

@@ -180,6 +180,12 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
               f"read wrongly; record them: {record}", file=sys.stderr)
     policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight,
                         rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+    from rtcohand_drake.learning.rest_release import release_advice
+    from rtcohand_drake.systems.gestures.registry import reads_real_hands
+
+    advice = release_advice(policy.release) if scenario.policy.rest_release else None
+    if advice is not None and reads_real_hands(args.gesture_source, getattr(args, "gesture_file", None)):
+        print(f"warning: {advice}", file=sys.stderr)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time
 

@@ -107,6 +107,11 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     # A person whose labels go on over a still hand keeps the policy's output as it is.
     holding = rr.fit_rest_release(_pieces(np.random.default_rng(1), still_label=True))
     assert not holding.on and holding.harm > rr.HARM and holding.gate(10) == 1.0
+    # What the run and the reading check say of each: nothing when on; why, when off.
+    assert rr.release_advice(resting) is None
+    advice = rr.release_advice(holding)
+    assert "off" in advice and f"{100 * holding.harm:.0f} %" in advice and "\n" not in advice
+    assert "no rest between gestures" in rr.release_advice(rr.RestRelease())
 
 
 def _box(model: str, pieces, rest_release=True):

@@ -397,6 +397,12 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
           + ")")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
+    if real and scenario.policy.rest_release:  # a real person's clips: does the command let go at rest?
+        from rtcohand_drake.learning.rest_release import fit_rest_release, release_advice
+
+        release = fit_rest_release([(c.features, c.labels) for c in clips])
+        print(release_advice(release) or (f"the rest release is on for these clips: the command lets go once the "
+                                           f"hand has been still for {release.still_to / args.rate_hz:.1f} s"))
     poor = [name for name, _, gain, _ in rows if gain < WEAK]
     shape = reference_gains[labels[1]]
     by_shape = [name for name in poor if shape.get(name, float("nan")) >= READS]

@@ -106,6 +106,21 @@ class RestRelease:
         return out
 
 
+def release_advice(release: RestRelease) -> str | None:
+    """None when the rest release is on; else one line saying why it is off for this person's clips
+    and what that means (the run and the reading check print it for a real hand)."""
+    if release.on:
+        return None
+    if release.harm > HARM:
+        return (f"the rest release is off for these clips: on them, letting go once the hand is still would take "
+                f"{100 * release.harm:.0f} % of the commands (at most {100 * HARM:.0f} % is allowed), because the hand "
+                "moves between gestures as much as in them, or the labels go on while it is held still; the "
+                "command may then go on for a moment after a gesture ends. Record the clips with the hand still "
+                "before each cue and after each gesture")
+    return ("the rest release is off for these clips: they show no rest between gestures, or no command; the "
+            "command may go on for a moment after a gesture ends")
+
+
 def _near_label(commanding: np.ndarray, margin: int) -> np.ndarray:
     """(T,) bool: a commanding step within `margin` steps."""
     near = commanding.copy()
