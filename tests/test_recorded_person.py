@@ -247,3 +247,34 @@ def test_study_of_recorded_people_writes_each_run_with_its_shares(people, tmp_pa
     assert sorted(p.name for p in (out / "logs").glob("p1_*.h5")) == ["p1_intent_s0.h5", "p1_responsive_s0.h5"]
     text = (out / "study.md").read_text()
     assert "no held-out recording (split test) of Tz+" in text and "| p1 | intent | 0 |" in text
+
+
+def test_study_of_recorded_people_runs_the_scenario_given(people, tmp_path):
+    import json
+
+    import yaml
+
+    from rtcohand_drake.analysis import study
+    from rtcohand_drake.scenario import ScenarioError, resolve_scenario_path
+
+    data = yaml.safe_load(resolve_scenario_path("inspection").read_text())
+    data["duration_s"] = 4.0
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "study"
+    status = study.main(["--recorded-people", str(people), "--people", "p1", "--conditions", "responsive",
+                         "--scenario", str(mine), "--workers", "0", "--out", str(out)])
+    assert status == 0
+    summary = json.loads((out / "study.json").read_text())
+    assert summary["scenario"] == str(mine) and summary["cap_s"] == 4.0  # the cap is the scenario's
+    from rtcohand_drake.run_log import read_run_log
+
+    log = read_run_log(out / "logs" / "p1_responsive_s0.h5")
+    assert log.command_time[-1] <= 4.0 + 1e-6  # the run stopped at the scenario's duration
+    assert f"scenario {mine}" in (out / "study.md").read_text()
+    (tmp_path / "bad.yaml").write_text("duration_s: [\n")
+    with pytest.raises(ScenarioError):
+        study.main(["--recorded-people", str(people), "--scenario", str(tmp_path / "bad.yaml"), "--workers", "0",
+                    "--out", str(out)])
+    with pytest.raises(SystemExit):  # only with --recorded-people
+        study.main(["--scenario", str(mine), "--out", str(out)])

@@ -49,15 +49,16 @@ def log_name(person: str, condition: str, seed: int) -> str:
     return f"{person}_{condition}_s{seed}.h5"
 
 
-def _scenario_path(folder: str, cap_s: float | None, hand_sign: bool = True) -> str:
-    """The inspection scenario, or a copy of it with its cap changed or its pause hand sign off."""
+def _scenario_path(folder: str, cap_s: float | None, hand_sign: bool = True, scenario: str = "inspection") -> str:
+    """`scenario` (a built-in name or a YAML path), or a copy of it with its cap changed or its pause hand
+    sign off."""
     import yaml
 
     from rtcohand_drake.scenario import resolve_scenario_path
 
     if cap_s is None and hand_sign:
-        return "inspection"
-    data = yaml.safe_load(resolve_scenario_path("inspection").read_text())
+        return scenario
+    data = yaml.safe_load(resolve_scenario_path(scenario).read_text())
     if cap_s is not None:
         data["duration_s"] = float(cap_s)
     if not hand_sign:
@@ -67,10 +68,24 @@ def _scenario_path(folder: str, cap_s: float | None, hand_sign: bool = True) -> 
     return str(path)
 
 
+def _resolved_scenario(scenario: str | None) -> str:
+    """The scenario the runs use: a built-in name as it is, a YAML path made absolute (the runs may be
+    on other workers); checked here, so that a bad one is one error, not one per run."""
+    from rtcohand_drake.scenario import load_scenario
+
+    if scenario is None:
+        return "inspection"
+    load_scenario(scenario)  # raises ScenarioError (one line) for a missing or malformed file
+    path = Path(scenario)
+    return str(path.resolve()) if path.suffix in (".yaml", ".yml") or path.exists() else scenario
+
+
 def run_recorded_condition(people_file: str, person: str, condition: str, out: str, seed: int = 0,
-                           cap_s: float | None = None, model: str | None = None, hand_sign: bool = True) -> dict:
-    """One run of `person` in `condition`, its log written to `out`; returns its entry (module doc).
-    `hand_sign=False` runs with the scenario's pause hand sign off. Raises on a run that fails."""
+                           cap_s: float | None = None, model: str | None = None, hand_sign: bool = True,
+                           scenario: str = "inspection") -> dict:
+    """One run of `person` in `condition` under `scenario` (a built-in name or a YAML path), its log
+    written to `out`; returns its entry (module doc). `hand_sign=False` runs with the scenario's pause
+    hand sign off. Raises on a run that fails."""
     import contextlib
     import io
     import tempfile
@@ -81,17 +96,17 @@ def run_recorded_condition(people_file: str, person: str, condition: str, out: s
     log = Path(out) / log_name(person, condition, seed)
     log.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as folder:
-        scenario_path = _scenario_path(folder, cap_s, hand_sign)
+        scenario_path = _scenario_path(folder, cap_s, hand_sign, scenario)
         if condition == "intent":
             from rtcohand_drake.analysis.reference_policies import run_intent_with_source
             from rtcohand_drake.cell.plant import eye_position
             from rtcohand_drake.systems.gestures.recorded_person import RecordedPerson, load_recorded_person
 
-            scenario = load_scenario(scenario_path)
-            recordings = load_recorded_person(people_file, person, scenario.policy.rate_hz)
-            source = RecordedPerson(recordings, scenario.cell.user_frame.to_rigid_transform(),
-                                    eye_position(scenario.cell), rate_hz=scenario.policy.rate_hz, seed=seed)
-            write_run_log(log, run_intent_with_source(scenario, source, seed=seed, stop_when_done=True,
+            loaded = load_scenario(scenario_path)
+            recordings = load_recorded_person(people_file, person, loaded.policy.rate_hz)
+            source = RecordedPerson(recordings, loaded.cell.user_frame.to_rigid_transform(),
+                                    eye_position(loaded.cell), rate_hz=loaded.policy.rate_hz, seed=seed)
+            write_run_log(log, run_intent_with_source(loaded, source, seed=seed, stop_when_done=True,
                                                       gesture_source="recorded (intent)"))
         else:
             from rtcohand_drake.run import main
@@ -103,24 +118,25 @@ def run_recorded_condition(people_file: str, person: str, condition: str, out: s
                 status = main(args)
             if status != 0:
                 raise RuntimeError(f"{log.name}: the run exited with status {status}")
-    return {**summarise_recorded(str(log)), "log": str(log)}
+    return {**summarise_recorded(str(log), scenario), "log": str(log)}
 
 
-def summarise_recorded(path: str) -> dict:
-    """`analysis.study.summarise` of a run log, plus contacts, limits exceeded and the following shares."""
+def summarise_recorded(path: str, scenario: str = "inspection") -> dict:
+    """`analysis.study.summarise` of a run log, plus contacts, limits exceeded and the following shares
+    (the limits and the user frame of `scenario`, the one the run used)."""
     from rtcohand_drake.analysis.gesture_following import run_log_following_shares
     from rtcohand_drake.analysis.inspection import limits_exceeded
     from rtcohand_drake.analysis.study import summarise
     from rtcohand_drake.run_log import read_run_log
     from rtcohand_drake.scenario import load_scenario
 
-    scenario = load_scenario("inspection")
+    loaded = load_scenario(scenario)
     log = read_run_log(path)
-    R_WU = scenario.cell.user_frame.to_rigid_transform().rotation().matrix()
+    R_WU = loaded.cell.user_frame.to_rigid_transform().rotation().matrix()
     wrong_way, drift = run_log_following_shares(log, R_WU)
     return {**summarise(path),
             "contacts": sum(e.kind in ("mold_contact", "cell_contact") for e in log.events),
-            "limits_exceeded": limits_exceeded(scenario, log),
+            "limits_exceeded": limits_exceeded(loaded, log),
             "wrong_way_share": wrong_way, "drift_share": drift,
             "sign_pauses": sum(e.kind == "pause" and "hand sign" in e.detail for e in log.events)}
 
@@ -208,7 +224,8 @@ def main_recorded(args) -> int:
     if unknown:
         raise InputError(f"{path}: no person named {', '.join(unknown)} (people: {', '.join(everyone)})")
     seeds = args.run_seeds or [args.seed if args.seed is not None else 0]
-    cap = args.cap if args.cap is not None else load_scenario("inspection").duration_s
+    scenario = _resolved_scenario(args.scenario)
+    cap = args.cap if args.cap is not None else load_scenario(scenario).duration_s
     model = str(args.model.resolve()) if args.model is not None else None
     logs = (args.logs or args.out / "logs").resolve()
     logs.mkdir(parents=True, exist_ok=True)
@@ -222,7 +239,7 @@ def main_recorded(args) -> int:
         return f"{person} {c} run seed {seed}: {state} ({o.seconds:.0f} s wall)"
 
     report = run_tasks(run_recorded_condition,
-                       [(k, (str(path), k[0], k[1], str(logs), k[2], args.cap, model, not args.no_hand_sign))
+                       [(k, (str(path), k[0], k[1], str(logs), k[2], args.cap, model, not args.no_hand_sign, scenario))
                         for k in keys],
                        workers=args.workers, address=args.address, label="recorded study", describe=describe,
                        runs_per_worker=args.runs_per_worker)
@@ -240,15 +257,16 @@ def main_recorded(args) -> int:
         from rtcohand_drake.scenario import load_scenario
         from rtcohand_drake.systems.gestures.registry import policy_model_name, reads_real_hands
 
-        policy = load_scenario("inspection").policy
+        policy = load_scenario(scenario).policy
         chosen = f"the scenario's, {policy_model_name(policy, reads_real_hands('recorded', path))}"
-    header = (f"Recorded people of `{path}`; policy file: {chosen}; run seeds "
-              f"{', '.join(map(str, seeds))}; the pause hand sign {'off' if args.no_hand_sign else 'on'}.")
+    header = (f"Recorded people of `{path}`; scenario {args.scenario or 'inspection'}; policy file: {chosen}; "
+              f"run seeds {', '.join(map(str, seeds))}; the pause hand sign {'off' if args.no_hand_sign else 'on'}.")
     text, medians = markdown(results, conditions, cap, failed, header)
     text += "\n" + engine_summary(report) + "\n"
     print(text)
     (args.out / "study.md").write_text(text)
-    summary = {"recorded_people": str(path), "people": people, "run_seeds": seeds, "cap_s": cap,
+    summary = {"recorded_people": str(path), "scenario": args.scenario or "inspection", "people": people,
+               "run_seeds": seeds, "cap_s": cap,
                "hand_sign": not args.no_hand_sign,
                "conditions": conditions, "model": model,
                "results": {p: {c: {str(s): r for s, r in runs.items()} for c, runs in by_c.items()}

@@ -259,6 +259,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="a gesture dataset file of recorded people: run them with the recorded gesture source "
                         "(analysis.recorded_study) instead of the generated populations")
     p.add_argument("--people", nargs="+", default=None, help="with --recorded-people: these people (default: all)")
+    p.add_argument("--scenario", default=None,
+                   help="with --recorded-people: the scenario the runs use, a built-in name or a YAML path "
+                        "(default: inspection)")
     p.add_argument("--no-hand-sign", action="store_true",
                    help="with --recorded-people: run a copy of the scenario with the pause hand sign off")
     p.add_argument("--run-seeds", type=int, nargs="+", default=None,
@@ -294,8 +297,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from rtcohand_drake.analysis.recorded_study import main_recorded
 
         return main_recorded(args)
-    if args.people is not None or args.no_hand_sign:
-        p.error("--people and --no-hand-sign go with --recorded-people")
+    if args.people is not None or args.no_hand_sign or args.scenario is not None:
+        p.error("--people, --scenario and --no-hand-sign go with --recorded-people")
     args.conditions = args.conditions or list(CONDITIONS)
     model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
