@@ -53,9 +53,7 @@ def real_time_factor(scenario, model, duration, repeats):
     factors = []
     for seed in range(repeats):
         source, pieces = make_builtin_person(scenario, seed=seed)
-        policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=seed,
-                            correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+        policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=seed)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)
         simulator.Initialize()
@@ -84,8 +82,7 @@ def onset_latencies(scenario, model, clips, pieces, mode, traces=None):
     rate = scenario.policy.rate_hz
     onsets = []
     for clip in clips:
-        policy = CchpPolicy(model, pieces, rate, seed=0, correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+        policy = CchpPolicy.from_scenario(model, pieces, scenario.policy)
         source = ReplayGestureSource([clip], rate)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)

@@ -60,9 +60,7 @@ def _gestures():
 
     scenario = load_scenario("inspection")
     source, pieces = make_builtin_person(scenario, seed=0)
-    policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz,
-                        correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+    policy = CchpPolicy.from_scenario(models_dir() / scenario.policy.model, pieces, scenario.policy)
     return build_run_diagram(scenario, source=source, policy=policy).diagram
 
 

@@ -178,8 +178,7 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
                       "then add MORE.h5 to --context-file")
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
               f"read wrongly; record them: {record}", file=sys.stderr)
-    policy = CchpPolicy(model, pieces, rate, seed=args.seed, correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+    policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=args.seed)
     from rtcohand_drake.learning.rest_release import release_advice
     from rtcohand_drake.systems.gestures.registry import reads_real_hands
 

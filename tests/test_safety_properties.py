@@ -188,8 +188,7 @@ def _harness(scenario, model):
     if wide:
         shape_rng = np.random.default_rng(1)
         pieces = [(np.hstack([x, shape_rng.normal(0, 0.05, (40, PATH_SHAPE_DIM))]), y) for x, y in pieces]
-    policy = CchpPolicy(model, pieces, RATE_HZ, seed=0, correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release)
+    policy = CchpPolicy.from_scenario(model, pieces, scenario.policy)
     run = build_run_diagram(scenario, source=source, policy=policy, operator=operator, gesture_source="stream")
     return scenario, run, source, operator
 

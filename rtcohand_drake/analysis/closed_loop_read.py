@@ -124,9 +124,7 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
     source, pieces = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed)
     rate = scenario.policy.rate_hz
     if policy is None:
-        policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, rate, seed=seed,
-                            correction_weight=scenario.policy.correction_weight,
-                        rest_release=scenario.policy.rest_release, output_gain=scenario.policy.output_gain)
+        policy = CchpPolicy.from_scenario(models_dir() / scenario.policy.model, pieces, scenario.policy, seed=seed)
     gesture_source = "intent" if policy.HasInputPort(INTENDED_TWIST) else None
     run = build_run_diagram(scenario, source=source, policy=policy, gesture_source=gesture_source)
     simulator = Simulator(run.diagram)

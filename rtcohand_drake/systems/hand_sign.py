@@ -58,20 +58,22 @@ def openness(keypoints: np.ndarray) -> float:
     return float(tips / knuckles) if knuckles > 1e-6 else float("nan")
 
 
-def thumb_elevation_deg(keypoints: np.ndarray) -> float:
-    """The thumb's (MCP to tip) angle from up (+Z of U), degrees."""
+def _from_up_deg(keypoints: np.ndarray, start: int, end: int) -> float:
+    """The angle (deg) from up (+Z of U) of the line from keypoint `start` to keypoint `end`."""
     kp = np.asarray(keypoints, float).reshape(21, 3)
-    d = kp[4] - kp[2]
+    d = kp[end] - kp[start]
     n = np.linalg.norm(d)
     return float(np.degrees(np.arccos(np.clip(d[2] / n, -1.0, 1.0)))) if n > 1e-9 else float("nan")
+
+
+def thumb_elevation_deg(keypoints: np.ndarray) -> float:
+    """The thumb's (MCP to tip) angle from up (+Z of U), degrees."""
+    return _from_up_deg(keypoints, 2, 4)
 
 
 def axis_from_up_deg(keypoints: np.ndarray) -> float:
     """The hand's axis (wrist to the middle finger's knuckle) angle from up (+Z of U), degrees."""
-    kp = np.asarray(keypoints, float).reshape(21, 3)
-    d = kp[MIDDLE_KNUCKLE] - kp[WRIST]
-    n = np.linalg.norm(d)
-    return float(np.degrees(np.arccos(np.clip(d[2] / n, -1.0, 1.0)))) if n > 1e-9 else float("nan")
+    return _from_up_deg(keypoints, WRIST, MIDDLE_KNUCKLE)
 
 
 def initial_state() -> np.ndarray:

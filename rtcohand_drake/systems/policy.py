@@ -184,6 +184,12 @@ class CchpPolicy(LeafSystem):
                                      prerequisites_of_calc={self.discrete_state_ticket(self._query)})
         self.DeclareStateOutputPort(READ_VARIANCE, self._variance)
 
+    @classmethod
+    def from_scenario(cls, model_path, context_pieces, policy: Policy, seed: int = 0) -> "CchpPolicy":
+        """The box with the scenario's `policy` settings (rate, correction weight, rest release, output gain)."""
+        return cls(model_path, context_pieces, policy.rate_hz, seed=seed, correction_weight=policy.correction_weight,
+                   rest_release=policy.rest_release, output_gain=policy.output_gain)
+
     def sample_z(self, resume_count: int) -> np.ndarray:
         """z ~ q(z|C), deterministic in (seed, resume_count)."""
         rng = np.random.default_rng([self._seed, int(resume_count)])
