@@ -21,6 +21,9 @@ Figures, for each file (medians over people, and the share over all steps pooled
   (0.12 m/s or 0.6 rad/s: the importer's label magnitudes);
 - `wrong_way_share`: of the steps with a gesture under way (a label at least a fifth of a full
   command), the share in which the output along the gesture's command is below minus a fifth of it.
+
+The figures are `analysis.replay_read`'s, which scores a replay run's log the same way
+(`run --gesture-source replay --clip PERSON --split test` prints them at the end of the run).
 """
 
 from __future__ import annotations
@@ -34,39 +37,6 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-FULL = np.array([0.12, 0.12, 0.12, 0.6, 0.6, 0.6])  # a full command on each axis (data.import_shrec17)
-SHARE = 0.2  # a fifth of a full command
-REST_AFTER_S = 0.5  # rest counted from this long after a gesture's label ends
-
-
-def rest_steps(labels: np.ndarray, rate_hz: float) -> np.ndarray:
-    """(T,) bool: steps with no label, from REST_AFTER_S after a label ends until the next starts."""
-    on = np.abs(labels).max(1) > 0
-    rest = np.zeros(len(labels), bool)
-    last_on = -np.inf
-    wait = int(round(REST_AFTER_S * rate_hz))
-    for t, active in enumerate(on):
-        if active:
-            last_on = t
-        elif t - last_on > wait and last_on > -np.inf:
-            rest[t] = True
-    return rest
-
-
-def motion_shares(out: np.ndarray, labels: np.ndarray, rate_hz: float) -> dict:
-    """Rest steps over a fifth of a full command, and gesture steps against the gesture (module docstring)."""
-    rest = rest_steps(labels, rate_hz)
-    moving = (np.abs(out) / FULL).max(1) > SHARE
-    scaled = labels / FULL
-    axis = np.abs(scaled).argmax(1)
-    rows = np.arange(len(labels))
-    under_way = np.abs(scaled[rows, axis]) >= SHARE
-    along = np.sign(scaled[rows, axis]) * out[rows, axis] / FULL[axis]
-    against = under_way & (along < -SHARE)
-    return {"rest_steps": int(rest.sum()), "rest_moving": int((rest & moving).sum()),
-            "gesture_steps": int(under_way.sum()), "against": int(against.sum())}
-
 
 def person_streams(clips, user: str, rate_hz: float, path_shape: bool):
     """(context pieces, [(features, labels, keypoints) of each test clip], (features, labels, keypoints)
@@ -105,6 +75,7 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool) 
     import torch
 
     from rtcohand_drake.analysis.context_reading import play_clip
+    from rtcohand_drake.analysis.replay_read import read_figures
     from rtcohand_drake.data.sampling import pack_context
     from rtcohand_drake.learning.rest_release import fit_rest_release, guard_stream
 
@@ -128,7 +99,8 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool) 
               "clip_by_clip_error": err_single, "clip_by_clip_zero": zero_single,
               "back_to_back_error": float(((out - y) ** 2).sum()), "back_to_back_zero": float((y ** 2).sum()),
               "release_on": bool(gate.on), "release_harm": float(gate.harm)}
-    result.update(motion_shares(out, y, rate_hz))
+    figures = read_figures(out, y, rate_hz)
+    result.update({k: getattr(figures, k) for k in ("rest_steps", "rest_moving", "gesture_steps", "against")})
     result["rest_share"] = result["rest_moving"] / max(result["rest_steps"], 1)
     result["wrong_way_share"] = result["against"] / max(result["gesture_steps"], 1)
     return result

@@ -3,7 +3,7 @@
     python -m rtcohand_drake.run [--scenario NAME | PATH.yaml]   # default: the built-in inspection
         [--duration S] [--realtime-rate R] [--no-meshcat] [--no-wait] [--seed N]
         [--gesture-source synthetic|replay|recorded|camera|scripted|joystick]
-        [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER]]   # recorded: --clip PERSON
+        [--gesture-file PATH.h5 [--clip USER/CLIP | --clip USER] [--split test]]   # recorded: --clip PERSON
         [--camera N | --video PATH] [--camera-calibration FILE]   # with --gesture-source camera
         [--context-file PATH.h5 [PATH.h5 ...] [--context-user USER]] [--user ID [--population-seed N]]
         [--model PATH.pt] [--log PATH.h5] [--html PATH.html] [--filter-mode paper|responsive]
@@ -11,7 +11,9 @@
         [--verbose]                                             # the libraries' own log lines too
 
 Prints the Meshcat URL (unless --no-meshcat), then a summary: faces
-inspected, completion time, peak workpiece speeds and safety events. Without
+inspected, completion time, peak workpiece speeds and safety events; for a
+replay of labelled clips also how well the policy read them
+(`analysis.replay_read`). Without
 --duration the run ends `done_hold_s` (3 s) after all six faces are inspected,
 or at the scenario's `duration_s` (180 s), or when a replayed stream ends.
 With Meshcat the page then keeps serving, replaying the recorded run, until
@@ -59,6 +61,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--gesture-file", type=Path, default=None, help="dataset file to replay (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--clip", default=None, help="USER/CLIP (one clip) or USER (all that user's clips, in name order); "
                    "with --gesture-source recorded: the person")
+    p.add_argument("--split", choices=("train", "test"), default=None,
+                   help="replay source: only the clips of this split (test: the person's held-out clips, "
+                        "their other labelled clips the context)")
     p.add_argument("--camera", type=int, default=None, help="camera source: the OpenCV camera number")
     p.add_argument("--video", type=Path, default=None,
                    help="camera source: a video file, played in simulated time at its own frame rate")
@@ -107,6 +112,8 @@ def _check_args(args) -> None:
         raise InputError("command line: --gesture-source recorded needs --gesture-file PEOPLE.h5 --clip PERSON")
     if args.gesture_source not in ("replay", "recorded") and (args.gesture_file is not None or args.clip is not None):
         raise InputError("command line: --gesture-file and --clip go with --gesture-source replay or recorded")
+    if args.split is not None and args.gesture_source != "replay":
+        raise InputError("command line: --split goes with --gesture-source replay")
     if args.gesture_source == "camera" and (args.camera is None) == (args.video is None):
         raise InputError("command line: --gesture-source camera needs exactly one of --camera N and --video PATH")
     if args.gesture_source != "camera" and camera_flags:
@@ -297,6 +304,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     for e in log.events:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1
     print("events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
+    if run.gesture_source == "replay":
+        from rtcohand_drake.analysis.replay_read import log_read
+
+        read = log_read(log)
+        if read is not None and read.zero > 0:
+            print(f"read of the replayed labels (the policy's output, back to back): {read.line()}")
     if args.log is not None:
         print(f"run log: {args.log}")
     if html is not None and run.visualizer is not None:

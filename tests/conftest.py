@@ -26,6 +26,22 @@ def load_script():
     return load
 
 
+@pytest.fixture(scope="session")
+def small_policy_file(tmp_path_factory):
+    """A real TorchScript export of a (randomly initialised, small) CCHP model."""
+    import torch
+
+    from rtcohand_drake.learning.export import script_policy
+    from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
+
+    torch.manual_seed(0)
+    model = Cchp(CchpConfig(hidden_size=32, aggregate_sizes=[32, 32], latent_trunk_sizes=[32, 32],
+                            latent_dim=8, key_size=16, output_hidden=[32]))
+    path = tmp_path_factory.mktemp("policy") / "policy.pt"
+    torch.jit.save(script_policy(model), str(path))
+    return path
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_report_header(config, start_path):
     """The session header names the repository, not the folder it was checked out in: a soak's

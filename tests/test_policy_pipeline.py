@@ -18,17 +18,8 @@ from rtcohand_drake.interfaces import GESTURE_FEATURES, RESUME_COUNT
 
 
 @pytest.fixture(scope="module")
-def policy_file(tmp_path_factory):
-    """A real TorchScript export of a (randomly initialised, small) CCHP model."""
-    from rtcohand_drake.learning.export import script_policy
-    from rtcohand_drake.learning.nets.cchp import Cchp, CchpConfig
-
-    torch.manual_seed(0)
-    model = Cchp(CchpConfig(hidden_size=32, aggregate_sizes=[32, 32], latent_trunk_sizes=[32, 32],
-                            latent_dim=8, key_size=16, output_hidden=[32]))
-    path = tmp_path_factory.mktemp("policy") / "policy.pt"
-    torch.jit.save(script_policy(model), str(path))
-    return path
+def policy_file(small_policy_file):
+    return small_policy_file
 
 
 @pytest.fixture(scope="module")

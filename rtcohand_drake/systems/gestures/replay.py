@@ -11,8 +11,8 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from rtcohand_drake.data.hand_features import join_recordings
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM, KEYPOINTS,
-                                       KEYPOINTS_DIM)
+from rtcohand_drake.interfaces import (FEATURE_DIM, GESTURE_FEATURES, GESTURE_STATUS, GESTURE_STATUS_DIM,
+                                       INTENDED_TWIST, KEYPOINTS, KEYPOINTS_DIM, TWIST_DIM)
 from rtcohand_drake.systems.gestures.base import NAN_HAND
 
 
@@ -25,6 +25,10 @@ class ReplayGestureSource(LeafSystem):
     (`hand_features.join_recordings`), so the hand does not jump from one clip to the next (the
     features, velocities, are each clip's own). After the last clip the
     source reports an invalid gesture (the supervisor's watchdog then stops the arm).
+
+    When every clip is labelled, the output `intended_twist` is the label of the frame being played
+    (zero after the last clip): the run logs it, and `analysis.replay_read` scores the policy's read
+    of the stream against it.
     """
 
     def __init__(self, clips: Sequence, rate_hz: float = 10.0, skeletons: Sequence[np.ndarray] | None = None):
@@ -43,6 +47,8 @@ class ReplayGestureSource(LeafSystem):
         self.DeclareVectorOutputPort(GESTURE_FEATURES, FEATURE_DIM, self._calc_features)
         self.DeclareVectorOutputPort(GESTURE_STATUS, GESTURE_STATUS_DIM, self._calc_status)
         self.DeclareVectorOutputPort(KEYPOINTS, KEYPOINTS_DIM, self._calc_keypoints)
+        if self._labels is not None:
+            self.DeclareVectorOutputPort(INTENDED_TWIST, TWIST_DIM, self._calc_label)
 
     @property
     def end_time(self) -> float:
@@ -70,6 +76,10 @@ class ReplayGestureSource(LeafSystem):
         else:  # the stream has ended: no fresh gesture
             output.SetFromVector([0.0, (len(self._features) - 1) / self._rate])
 
+    def _calc_label(self, context, output: BasicVector):
+        k = self._index(context)
+        output.SetFromVector(self._labels[k] if k < len(self._labels) else np.zeros(TWIST_DIM))
+
     def _calc_keypoints(self, context, output: BasicVector):
         k = self._index(context)
         if self._skeletons is not None and k < len(self._skeletons):
@@ -79,7 +89,8 @@ class ReplayGestureSource(LeafSystem):
 
 
 def from_options(options, scenario):
-    """The `replay` source: `options.gesture_file`, optionally one clip or user (`options.clip`).
+    """The `replay` source: `options.gesture_file`, optionally one clip or user (`options.clip`),
+    optionally only the clips of one split (`options.split`: `test`, a person's held-out clips).
 
     Its default context is the replayed user's other labelled clips in the same file.
     """
@@ -94,6 +105,11 @@ def from_options(options, scenario):
         raw = find_clips(raw, options.clip)
         if not raw:
             raise InputError(f"{path}: no clip or user named {options.clip!r}")
+    split = getattr(options, "split", None)
+    if split is not None:
+        raw = [c for c in raw if c.split == split]
+        if not raw:
+            raise InputError(f"{path}: no clip of split {split!r}" + (f" for {options.clip!r}" if options.clip else ""))
     rate = scenario.policy.rate_hz
     clips = [to_policy_clip(c, rate) for c in raw]
     skeletons = [resample(c.keypoints.reshape(len(c.keypoints), -1).astype(float), c.times, rate)[0] for c in raw]
