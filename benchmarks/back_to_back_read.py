@@ -69,13 +69,15 @@ def person_streams(clips, user: str, rate_hz: float, path_shape: bool):
     return [(p.features, p.labels) for p in context], single, stream
 
 
-def read_person(module, context, single, stream, rate_hz: float, release: bool) -> dict:
+def read_person(module, context, single, stream, rate_hz: float, release: bool, hold: bool = True) -> dict:
     """The figures of one person (module docstring); with `release`, the output gated by the person's
-    rest release (`learning.rest_release`) as the policy box gates it."""
+    rest release (`learning.rest_release`) as the policy box gates it; with `hold`, then held as the
+    box holds it where the file asks for it (`learning.command_hold`)."""
     import torch
 
     from rtcohand_drake.analysis.context_reading import play_clip
     from rtcohand_drake.analysis.replay_read import read_figures
+    from rtcohand_drake.learning.command_hold import fit_hold, hold_settings
     from rtcohand_drake.data.sampling import pack_context
     from rtcohand_drake.learning.rest_release import fit_rest_release, guard_stream
 
@@ -85,11 +87,13 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool) 
                                                       torch.from_numpy(mask))
     gate = fit_rest_release(context)
     gate.on = gate.on and release
+    held = fit_hold(hold_settings(module), context) if hold else None
     wide = int(module.feature_dim) > 36
 
     def read(f, kq):
         f = guard_stream(gate, np.nan_to_num(f), kq if wide else None, rate_hz)
-        return play_clip(module, f, keys, values, z_mu) * gate.gates(f)[:, None]
+        out = play_clip(module, f, keys, values, z_mu) * gate.gates(f)[:, None]
+        return held.apply(out) if held is not None else out
 
     err_single = sum(float(((read(f, kq) - y) ** 2).sum()) for f, y, kq in single)
     zero_single = sum(float((np.asarray(y, np.float64) ** 2).sum()) for _, y, _ in single)
@@ -98,7 +102,7 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool) 
     result = {"clip_by_clip": err_single / zero_single, "back_to_back": float(((out - y) ** 2).sum() / (y ** 2).sum()),
               "clip_by_clip_error": err_single, "clip_by_clip_zero": zero_single,
               "back_to_back_error": float(((out - y) ** 2).sum()), "back_to_back_zero": float((y ** 2).sum()),
-              "release_on": bool(gate.on), "release_harm": float(gate.harm)}
+              "release_on": bool(gate.on), "release_harm": float(gate.harm), "hold": held is not None}
     figures = read_figures(out, y, rate_hz)
     result.update({k: getattr(figures, k) for k in ("rest_steps", "rest_moving", "gesture_steps", "against")})
     result["rest_share"] = result["rest_moving"] / max(result["rest_steps"], 1)
@@ -127,6 +131,8 @@ def main(argv=None) -> int:
     p.add_argument("--rate-hz", type=float, default=10.0, help="the policy rate")
     p.add_argument("--no-release", action="store_true", help="read without the rest release (the box's "
                    "policy.rest_release: false)")
+    p.add_argument("--no-hold", action="store_true", help="read without the command hold (the box's "
+                   "policy.command_hold: false)")
     p.add_argument("--out", default=None, help="write the figures to this JSON file")
     args = p.parse_args(argv)
 
@@ -140,7 +146,8 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     clips = read_dataset(args.data)
     users = args.people or sorted({c.user for c in clips})
-    result = {"data": pathlib.Path(args.data).name, "people": users, "rest_release": not args.no_release, "models": {}}
+    result = {"data": pathlib.Path(args.data).name, "people": users, "rest_release": not args.no_release,
+              "command_hold": not args.no_hold, "models": {}}
     for name in args.models:
         module = load_policy(name)
         wide = int(module.feature_dim) > FEATURE_DIM
@@ -148,7 +155,7 @@ def main(argv=None) -> int:
         for user in tqdm(users, desc=pathlib.Path(name).name, unit="person", file=sys.stderr):
             streams = person_streams(clips, user, args.rate_hz, wide)
             if streams is not None:
-                people[user] = read_person(module, *streams, args.rate_hz, not args.no_release)
+                people[user] = read_person(module, *streams, args.rate_hz, not args.no_release, not args.no_hold)
         s = summary(people)
         result["models"][pathlib.Path(name).name] = {"summary": s, "people": people}
         print(f"{pathlib.Path(name).name}: {s['people']} people; share of zero twist (all steps pooled / median "

@@ -236,3 +236,8 @@ def test_recorded_tracking_preset_is_what_generate_writes(tmp_path):
     for key, value in RECORDED_TRACKING.items():
         assert generator[key] == (list(value) if isinstance(value, tuple) else value)
     assert generator["glitch_prob"] > 0 and generator["jitter_m"] < CONFIG.jitter_m
+    assert generator["p_repeated_rhythm"] == CONFIG.p_repeated_rhythm  # the default, unless asked
+    steady = tmp_path / "steady.h5"
+    assert main(["--out", str(steady), "--users", "1", "--seed", "2", "--repeated-rhythm-share", "0", "--quiet"]) == 0
+    with h5py.File(steady, "r") as f:
+        assert json.loads(f.attrs["generator"])["p_repeated_rhythm"] == 0.0

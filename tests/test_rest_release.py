@@ -1,4 +1,5 @@
-"""The rest release and the jump guard (learning.rest_release), alone and in the policy box.
+"""The rest release and the jump guard (learning.rest_release), and the command hold
+(learning.command_hold), alone and in the policy box.
 
 The people here are written by the tests: a hand that strokes along one axis per command and rests,
 still, before and after each stroke, as the recorded people of `data.import_shrec17` do.
@@ -114,8 +115,9 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     assert "no rest between gestures" in rr.release_advice(rr.RestRelease())
 
 
-def _box(model: str, pieces, rest_release=True):
-    policy = CchpPolicy(models_dir() / model, pieces, RATE, seed=0, rest_release=rest_release)
+def _box(model: str, pieces, rest_release=True, command_hold=True):
+    policy = CchpPolicy(models_dir() / model, pieces, RATE, seed=0, rest_release=rest_release,
+                        command_hold=command_hold)
     return policy, policy.CreateDefaultContext()
 
 
@@ -192,3 +194,58 @@ def test_recordings_join_without_a_jump():
     np.testing.assert_allclose(joined[1][2].mean(0), a[-1].mean(0), atol=1e-12)
     np.testing.assert_allclose(joined[1][2:] - joined[1][2], b[2:] - b[2], atol=1e-12)  # moved, not changed
     assert np.isnan(joined[1][:2]).all()
+
+
+def test_the_command_hold_as_written():
+    """A command the output points along at >= high of its size for steps_on steps is held (share of it
+    at full size, the rest the output) until the output is under low for steps_off steps; another
+    command that does the same takes over; an axis the person never commands is never held."""
+    from rtcohand_drake.learning.command_hold import CommandHold
+
+    sizes = np.array([0.12, 0.12, 0.0, 0.6, 0.6, 0.6])  # no Tz in this person's context
+    hold = CommandHold(sizes, high=0.3, steps_on=3, low=0.1, steps_off=2, share=0.5)
+    y = np.zeros((12, 6))
+    y[0:4, 0] = 0.05  # +Tx at 0.42 of its size: held from the third step (index 2)
+    y[4, 0] = 0.02  # 0.17: not low, the hold stays
+    y[5:7, 0] = 0.005  # 0.04, twice: the hold ends at the second (index 6)
+    y[7:, 4] = -0.3  # -Ry at 0.5: held from index 9
+    y[10:, 2] = 0.5  # a large Tz, which this person never commands: not read as a command, and Ry stays held
+    out = hold.apply(y)
+    expected = y.copy()
+    for steps, axis, command in (((2, 3, 4, 5), 0, 0.12), ((9, 10, 11), 4, -0.6)):
+        for t in steps:  # half the held command at its full size, half the output (all of it)
+            expected[t] = 0.5 * y[t]
+            expected[t, axis] += 0.5 * command
+    np.testing.assert_allclose(out, expected, atol=1e-12)
+    with pytest.raises(ValueError, match="low < high"):
+        CommandHold(sizes, high=0.1, low=0.2)
+
+
+def test_the_box_holds_what_the_file_asks_for_and_lets_go_at_rest():
+    """The file for real hands asks for the hold; in the box a stroke's command is held as
+    `CommandHold.apply` holds the unheld box's output, and once the hand rests the command is nothing
+    from the fourth still period on (0.4 s). The default file, or `policy.command_hold: false`, holds
+    nothing."""
+    from rtcohand_drake.learning.command_hold import hold_settings
+    from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.scenario import load_scenario
+
+    rng = np.random.default_rng(6)
+    pieces = _pieces(rng, path_shape=True)
+    held, c1 = _box("cchp_path_shape.pt", pieces)
+    plain, c2 = _box("cchp_path_shape.pt", pieces, command_hold=False)
+    assert held.hold is not None and plain.hold is None
+    np.testing.assert_allclose(held.hold.sizes, FULL, rtol=1e-6)  # the person's command sizes
+    assert load_scenario("inspection").policy.command_hold is True
+    assert hold_settings(load_policy(models_dir() / "cchp_default.pt")) is None
+    assert _box("cchp_default.pt", _pieces(rng))[0].hold is None
+    kp, _ = _stroke_clip(0, rng, rest=0, moving=14)  # +Tx
+    x, _ = hand_features(kp, RATE, RATE)
+    still = np.repeat(kp[-1:], 10, axis=0)
+    stream = [(xi, k) for xi, k in zip(x[1:], kp[1:])] + [(np.zeros(FEATURE_DIM), k) for k in still]
+    outs = np.array([[_step(p, c, xi, k) for p, c in ((held, c1), (plain, c2))] for xi, k in stream])
+    np.testing.assert_allclose(outs[:, 0], held.hold.apply(outs[:, 1]), atol=1e-6)
+    moving = len(x) - 1
+    assert np.any(np.abs(outs[:moving, 0] - outs[:moving, 1]) > 1e-3)  # the hold took hold in the stroke
+    assert outs[:moving, 0, 0].mean() > outs[:moving, 1, 0].mean()  # and moved the part further along +Tx
+    assert np.all(outs[moving + 3:, 0] == 0.0)  # still from the first rest period: nothing from the fourth

@@ -113,9 +113,10 @@ def read_figures(out: np.ndarray, labels: np.ndarray, rate_hz: float) -> ReplayR
                       gesture_steps=int(under_way.sum()), against=int((under_way & (along < -SHARE)).sum()))
 
 
-def log_read(log) -> ReplayRead | None:
-    """The figures of a run log (`run_log.RunLog`) whose source logged the labels it played; None
-    for a log without them (another source, or clips without labels)."""
+def paired(log) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(outputs (T, 6), labels (T, 6), rate in Hz) of a run log (`run_log.RunLog`) whose source logged
+    the labels it played, each label beside the box's read of its frame; None for a log without them
+    (another source, or clips without labels)."""
     times, labels = np.asarray(log.gesture_time, float), np.asarray(log.gesture_intended, float)
     policy_times = np.asarray(log.policy_time, float)
     if len(times) < 2 or len(labels) != len(times) or len(policy_times) < 2:
@@ -127,15 +128,25 @@ def log_read(log) -> ReplayRead | None:
     found[found] = np.abs(policy_times[k[found]] - (times[found] + period)) < 1e-3 * period
     if not found.any():
         return None
-    return read_figures(np.asarray(log.policy_mean, float)[k[found]], labels[found], 1.0 / period)
+    return np.asarray(log.policy_mean, float)[k[found]], labels[found], 1.0 / period
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def log_read(log) -> ReplayRead | None:
+    """The figures of a run log (`paired`); None for a log without the labels played."""
+    pairs = paired(log)
+    return None if pairs is None else read_figures(*pairs)
+
+
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m rtcohand_drake.analysis.replay_read",
                                 description=__doc__.splitlines()[0])
     p.add_argument("logs", nargs="+", help="run logs of replays of labelled clips (run --log)")
     p.add_argument("--json", default=None, help="write each log's figures and the pooled ones to this file")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
     from rtcohand_drake.errors import InputError
     from rtcohand_drake.run_log import read_run_log
 
@@ -157,7 +168,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
+def entry_point() -> None:
     from rtcohand_drake.errors import run_cli
 
     sys.exit(run_cli(main, prog="rtcohand_drake.analysis.replay_read"))
+
+
+if __name__ == "__main__":
+    entry_point()

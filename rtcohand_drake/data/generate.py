@@ -1,7 +1,7 @@
 """Generate a simulated gesture dataset (docs/interfaces.md, the gesture dataset file).
 
     python -m rtcohand_drake.data.generate --out PATH.h5 [--users 15] [--seed N] [--fps 30]
-        [--single-stroke-share P] [--recorded-tracking]
+        [--single-stroke-share P] [--repeated-rhythm-share P] [--recorded-tracking]
 
 Bad arguments or an unwritable output exit with status 2 and one line on stderr.
 """
@@ -54,6 +54,9 @@ def make_parser() -> argparse.ArgumentParser:
     parser.add_argument("--single-stroke-share", type=_share, default=GeneratorConfig.p_single_stroke,
                         help="share of users who make each move or turn as one stroke out and partly back, "
                              "as recorded people do (default 0)")
+    parser.add_argument("--repeated-rhythm-share", type=_share, default=GeneratorConfig.p_repeated_rhythm,
+                        help="share of users who gesture in repeated strokes (default "
+                             f"{GeneratorConfig.p_repeated_rhythm}); 0: every user moves steadily while gesturing")
     parser.add_argument("--recorded-tracking", action="store_true",
                         help="track the hands as recorded people's were: steadier frame to frame, with glitches of "
                              "centimetres now and then (GeneratorConfig's RECORDED_TRACKING; default: the "
@@ -66,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
 
     config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share,
+                     p_repeated_rhythm=args.repeated_rhythm_share,
                      **(RECORDED_TRACKING if args.recorded_tracking else {}))
     start = time.perf_counter()
 

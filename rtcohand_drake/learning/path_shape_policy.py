@@ -2,7 +2,8 @@
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
         [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--anchors N] [--min-gain G]
-        [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--encoder ENCODER.pt]
+        [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--hold HIGH STEPS_ON LOW STEPS_OFF SHARE]
+        [--encoder ENCODER.pt]
 
 The policy file for real hands, `models/cchp_path_shape.pt`, is this file built over the default
 CCHP, `models/cchp_default.pt`, with the defaults below.
@@ -47,6 +48,11 @@ shape about the centre now, the centre's velocity over 0.4 s weighted W) of the 
 matched to each clip from its first step, the clips' labels at their best matches weighted by
 exp(-(mean cost - the best) / TAU). Its state rides in h and c after the CCHP's, with room for
 MATCH_MAX_STEPS context steps; A is chosen on the committed kernel read without it.
+
+With `--hold HIGH STEPS_ON LOW STEPS_OFF SHARE` (the shipped file: 0.3 3 0.1 2 0.5) the file asks the
+policy box to hold a command its output keeps pointing along (`learning.command_hold`): the file's
+attribute `command_hold` carries the five numbers (SHARE 0: no hold); the file's own steps are
+unchanged.
 
 With `--encoder` (a `learning.hand_encoder` file, learned across people), s_i and s(t) are the
 encoder's embedding of the path and shape instead of the features themselves; the rest is unchanged.
@@ -110,6 +116,11 @@ DEFAULT_ANCHORS = MATCH_MAX_STEPS
 # development simulated person's share) the file read two of three held-out populations worse than the
 # CCHP alone (docs/policy.md).
 DEFAULT_MIN_GAIN = 0.0
+# The command hold the file asks the policy box for (learning.command_hold): [high, steps_on, low, steps_off,
+# share]. Chosen on the recorded development people's held-out gestures back to back through the run
+# command (docs/real_people.md, "The command hold").
+DEFAULT_HOLD = (0.3, 3.0, 0.1, 2.0, 0.5)
+NO_HOLD = (0.3, 3.0, 0.1, 2.0, 0.0)
 MATCH_NONE = 1e18  # the cost of a match that cannot be made
 
 
@@ -120,7 +131,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                  folds: int = 0, rows: int = DEFAULT_CV_ROWS, encoder: Optional[torch.jit.ScriptModule] = None,
                  commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH),
                  match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
-                 anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0):
+                 anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0,
+                 hold: Tuple[float, float, float, float, float] = NO_HOLD):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -131,6 +143,10 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             raise InputError(f"commit needs a share in [0, 1] and 0 <= low < high; got {tuple(commit)}")
         if not (0.0 <= match[0] <= 1.0 and match[1] >= 0 and match[2] > 0):
             raise InputError(f"match needs a share in [0, 1], a velocity weight >= 0 and tau > 0; got {tuple(match)}")
+        if len(hold) != 5 or not (0.0 <= hold[2] < hold[0] and hold[1] >= 1 and hold[3] >= 1 and 0.0 <= hold[4] <= 1.0):
+            raise InputError(f"hold needs 0 <= low < high, steps of at least 1 and a share in [0, 1]; got {tuple(hold)}")
+        # The command hold the box applies to this file's output (learning.command_hold); share 0: none.
+        self.command_hold = [float(v) for v in hold]
         if anchors < 2 or not 0.0 <= min_gain < 1.0:
             raise InputError(f"anchors must be at least 2 and min_gain in [0, 1); got {anchors}, {min_gain}")
         # A person's kernel read is used only if, over their own clips, the fitted blend removes at least
@@ -512,7 +528,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             encoder: Optional[os.PathLike] = None,
                             commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH),
                             match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
-                            anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN) -> pathlib.Path:
+                            anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN,
+                            hold: Tuple[float, float, float, float, float] = DEFAULT_HOLD) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
@@ -526,13 +543,14 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
                                                           encoder_module, tuple(commit), tuple(match),
-                                                          anchors, min_gain).eval())
+                                                          anchors, min_gain, tuple(hold)).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
         **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
+        **({"command_hold": list(hold)} if hold[4] > 0 else {}),
         "features": "36 hand-part velocities, then the hand's path and shape (hand_features.PathShapeStream)"})
     if encoder_card is not None:
         card["path_shape_read"]["encoder"] = dict(encoder_card, file=pathlib.Path(encoder).name)
@@ -564,6 +582,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-gain", type=float, default=DEFAULT_MIN_GAIN,
                    help="use a person's kernel read only if the fitted blend removes at least this share of the "
                         "CCHP's squared error over their own clips")
+    p.add_argument("--hold", type=float, nargs=5, metavar=("HIGH", "STEPS_ON", "LOW", "STEPS_OFF", "SHARE"),
+                   default=list(DEFAULT_HOLD),
+                   help="ask the policy box to hold SHARE of a command at its full size once the output has pointed "
+                        "along it at HIGH of its size for STEPS_ON steps, until it falls under LOW for STEPS_OFF "
+                        "steps (learning.command_hold; SHARE 0: no hold)")
     p.add_argument("--encoder", default=None,
                    help="a learning.hand_encoder file: the kernel reads the path and shape through it")
     return p
@@ -573,7 +596,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
                                   args.encoder, tuple(args.commit), tuple(args.match), args.anchors,
-                                  args.min_gain)
+                                  args.min_gain, tuple(args.hold))
     print(f"wrote {out}")
     return 0
 

@@ -32,6 +32,11 @@ still for a few periods, the command lets go of the gesture the policy just saw,
 memory still holds; the period the hand moves again, the gate is open. It only ever scales the
 command down, and the module is still fed its own mean.
 
+Where the policy file asks for it (its `command_hold` attribute: the file for real hands) and the
+scenario allows it (`policy.command_hold`), the command hold follows the release: once the output
+has pointed along one command for a few periods, part of that command is held at its full size
+until the output fades (`learning.command_hold`); it starts afresh on a resume.
+
 Input ports
   gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)
   resume_count     (1)  optional; z is resampled when it changes
@@ -62,6 +67,7 @@ from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM, PathShapeStream
 from rtcohand_drake.data.sampling import pack_context
 from rtcohand_drake.errors import InputError
 from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.learning.command_hold import CommandHold, fit_hold, hold_settings
 from rtcohand_drake.learning.rest_release import LOST_STEPS, fit_rest_release
 from rtcohand_drake.interfaces import (ATTENTION, FEATURE_DIM, GESTURE_FEATURES, KEYPOINTS, KEYPOINTS_DIM, POLICY_MEAN,
                                        POLICY_STD, READ_VARIANCE, RESUME_COUNT, SCALAR_DIM)
@@ -92,6 +98,10 @@ class Policy:
     # command (recorded people in the closed loop: docs/real_people.md, section 8) moves the part
     # faster. 1 = the policy's own output. The supervisor's limits apply as always.
     output_gain: float = 1.0
+    # Hold a command the output keeps pointing along, where the policy file asks for it (its
+    # `command_hold` attribute: the file for real hands; rtcohand_drake.learning.command_hold);
+    # false: never.
+    command_hold: bool = True
 
 
 def blended_output(mean, read, correction_weight: float) -> np.ndarray:
@@ -106,10 +116,13 @@ def blended_output(mean, read, correction_weight: float) -> np.ndarray:
 
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
-                 correction_weight: float = 1.0, rest_release: bool = True, output_gain: float = 1.0):
+                 correction_weight: float = 1.0, rest_release: bool = True, output_gain: float = 1.0,
+                 command_hold: bool = True):
         """`model_path`: an exported policy file, or a module already loaded by `load_policy`;
         `rest_release`: gate the output by the person's rest release (module docstring);
-        `output_gain`: the output twist multiplied by it (scenario `policy.output_gain`)."""
+        `output_gain`: the output twist multiplied by it (scenario `policy.output_gain`);
+        `command_hold`: hold a command the output keeps pointing along, where the file asks for it
+        (`learning.command_hold`)."""
         super().__init__()
         if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
             raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
@@ -139,6 +152,7 @@ class CchpPolicy(LeafSystem):
         x_c, y_c, mask = pack_context(context_pieces)
         self.release = fit_rest_release(context_pieces)  # the jump guard is always on; the gate as asked
         self.release.on = self.release.on and bool(rest_release)
+        self.hold = fit_hold(hold_settings(self.module), context_pieces) if command_hold else None
         with torch.no_grad():
             keys, values, z_mu, z_sigma = self.module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
@@ -177,6 +191,7 @@ class CchpPolicy(LeafSystem):
             self._shape = self.DeclareDiscreteState(self._stream.state)
         self._still = self.DeclareDiscreteState(np.zeros(1))  # the rest release's still count
         self._lost = self.DeclareDiscreteState(np.zeros(1))  # periods the hand has been lost (the path's restart)
+        self._held = self.DeclareDiscreteState(CommandHold.initial_state())  # the command hold's state
         self.DeclarePeriodicDiscreteUpdateEvent(self.period_s, 0.0, self._update)
         self.DeclareStateOutputPort(POLICY_MEAN, self._out)
         self.DeclareStateOutputPort(POLICY_STD, self._std)
@@ -186,9 +201,11 @@ class CchpPolicy(LeafSystem):
 
     @classmethod
     def from_scenario(cls, model_path, context_pieces, policy: Policy, seed: int = 0) -> "CchpPolicy":
-        """The box with the scenario's `policy` settings (rate, correction weight, rest release, output gain)."""
+        """The box with the scenario's `policy` settings (rate, correction weight, rest release, output gain,
+        command hold)."""
         return cls(model_path, context_pieces, policy.rate_hz, seed=seed, correction_weight=policy.correction_weight,
-                   rest_release=policy.rest_release, output_gain=policy.output_gain)
+                   rest_release=policy.rest_release, output_gain=policy.output_gain,
+                   command_hold=policy.command_hold)
 
     def sample_z(self, resume_count: int) -> np.ndarray:
         """z ~ q(z|C), deterministic in (seed, resume_count)."""
@@ -258,12 +275,18 @@ class CchpPolicy(LeafSystem):
         still = 0.0 if resumes_changed else self.release.next_count(float(get(self._still)[0]), x[:FEATURE_DIM])
         discrete_state.set_value(self._still, [still])
         mean, std, h, c, read, v, query = self.step(x, y_prev, h, c, z)
-        out = blended_output(mean, read, self.correction_weight) * (self.release.gate(still) * self.output_gain)
+        out = blended_output(mean, read, self.correction_weight) * self.release.gate(still)
+        held = CommandHold.initial_state() if resumes_changed else np.array(get(self._held))
+        if self.hold is not None and np.all(np.isfinite(out)):
+            out, held = self.hold.step(held, out)
+        out = out * self.output_gain
         if not (np.all(np.isfinite(out)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(h))
                 and np.all(np.isfinite(c))):
             mean, out, std = np.zeros(6), np.zeros(6), np.full(6, np.inf)  # never pass a NaN on: no motion
             v = np.inf
             h, c = np.zeros_like(h), np.zeros_like(c)
+            held = CommandHold.initial_state()
+        discrete_state.set_value(self._held, held)
         discrete_state.set_value(self._h, h)
         discrete_state.set_value(self._c, c)
         discrete_state.set_value(self._y, mean)
