@@ -198,21 +198,23 @@ def test_recordings_join_without_a_jump():
 
 def test_the_command_hold_as_written():
     """A command the output points along at >= high of its size for steps_on steps is held (share of it
-    at full size, the rest the output) until the output is under low for steps_off steps; another
-    command that does the same takes over; an axis the person never commands is never held."""
+    at full size, the rest the output) until the output along it is under low for steps_off steps (it
+    fades, or turns to another command); another command that does the same takes over; an axis the
+    person never commands is never held."""
     from rtcohand_drake.learning.command_hold import CommandHold
 
     sizes = np.array([0.12, 0.12, 0.0, 0.6, 0.6, 0.6])  # no Tz in this person's context
     hold = CommandHold(sizes, high=0.3, steps_on=3, low=0.1, steps_off=2, share=0.5)
-    y = np.zeros((12, 6))
+    y = np.zeros((15, 6))
     y[0:4, 0] = 0.05  # +Tx at 0.42 of its size: held from the third step (index 2)
     y[4, 0] = 0.02  # 0.17: not low, the hold stays
     y[5:7, 0] = 0.005  # 0.04, twice: the hold ends at the second (index 6)
-    y[7:, 4] = -0.3  # -Ry at 0.5: held from index 9
-    y[10:, 2] = 0.5  # a large Tz, which this person never commands: not read as a command, and Ry stays held
+    y[7:12, 4] = -0.3  # -Ry at 0.5: held from index 9
+    y[10:12, 2] = 0.5  # a large Tz, which this person never commands: not read as a command, and Ry stays held
+    y[12:, 3] = 0.12  # the read turns to +Rx at 0.2 (not yet a command to hold): -Ry is let go at index 13
     out = hold.apply(y)
     expected = y.copy()
-    for steps, axis, command in (((2, 3, 4, 5), 0, 0.12), ((9, 10, 11), 4, -0.6)):
+    for steps, axis, command in (((2, 3, 4, 5), 0, 0.12), ((9, 10, 11, 12), 4, -0.6)):
         for t in steps:  # half the held command at its full size, half the output (all of it)
             expected[t] = 0.5 * y[t]
             expected[t, axis] += 0.5 * command

@@ -13,8 +13,9 @@ small makes the task slow. The hold lets the read decide once, and then keeps th
     d(t)     = the axis and sign of s's largest component, |s|(t) its size
     a candidate d has |s| >= high for steps_on steps in a row: it becomes the held command (or
     replaces the one held);
-    the held command ends once |s| < low for steps_off steps in a row (the hand rests: the rest
-    release has let go; or the read has faded);
+    the held command ends once the output along it, sign(d) s_d(t), is under low for steps_off
+    steps in a row (the hand rests and the rest release has let go; or the read has faded, or
+    turned to another command);
     while a command d is held:  y'(t) = share x sign(d) sizes[d] e_d + (1 - share) y(t);
     otherwise                   y'(t) = y(t).
 
@@ -72,8 +73,9 @@ class CommandHold:
             cand, cand_sign = float(axis), sign
         else:
             cand, cand_sign, count = -1.0, 0.0, 0.0
-        if held >= 0:
-            off = off + 1.0 if size < self.low else 0.0
+        if held >= 0:  # the read still supports the held command while its output along it is >= low
+            along = held_sign * float(s[int(held)])
+            off = off + 1.0 if along < self.low else 0.0
             if off >= self.steps_off:
                 held, held_sign, off = -1.0, 0.0, 0.0
         if cand >= 0 and count >= self.steps_on and (cand, cand_sign) != (held, held_sign):
