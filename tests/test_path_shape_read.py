@@ -251,8 +251,6 @@ def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_
             y, _, h, c, _ = module.step(torch.from_numpy(x), y, h, c, keys, values, z)
             offline.append(y.numpy().copy())
     offline = np.array(offline) * policy.release.gates(features)[:, None]
-    assert policy.hold is not None  # the builder's file asks for the command hold (learning.command_hold)
-    offline = policy.hold.apply(offline)
     k = np.round(log.sample_times() * 10.0).astype(int) - 1  # a sample at k/rate shows the update at (k-1)/rate
     ok = (k >= 1) & (k < len(offline))
     assert ok.sum() >= len(offline) - 3 and np.abs(offline).max() > 1e-3
@@ -274,10 +272,11 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
         "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
-        "command_hold": list(psp.DEFAULT_HOLD), "features": card["path_shape_read"]["features"]}
-    assert list(load_policy(models / "cchp_path_shape.pt").command_hold) == list(psp.DEFAULT_HOLD) == [
-        0.3, 3.0, 0.1, 2.0, 0.5]
+        "features": card["path_shape_read"]["features"]}
     wide, inner = load_policy(models / "cchp_path_shape.pt"), load_policy(models / "cchp_default.pt")
+    from rtcohand_drake.learning.command_hold import hold_settings
+
+    assert hold_settings(wide) is None and psp.DEFAULT_HOLD[4] == 0.0  # no command hold asked for (not shipped)
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.kernel_anchors, wide.min_gain) == (psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN)

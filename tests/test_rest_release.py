@@ -115,7 +115,8 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     assert "no rest between gestures" in rr.release_advice(rr.RestRelease())
 
 
-def _box(model: str, pieces, rest_release=True, command_hold=True):
+def _box(model, pieces, rest_release=True, command_hold=True):
+    """The box with a file of models/ (a name) or any path."""
     policy = CchpPolicy(models_dir() / model, pieces, RATE, seed=0, rest_release=rest_release,
                         command_hold=command_hold)
     return policy, policy.CreateDefaultContext()
@@ -223,19 +224,23 @@ def test_the_command_hold_as_written():
         CommandHold(sizes, high=0.1, low=0.2)
 
 
-def test_the_box_holds_what_the_file_asks_for_and_lets_go_at_rest():
-    """The file for real hands asks for the hold; in the box a stroke's command is held as
-    `CommandHold.apply` holds the unheld box's output, and once the hand rests the command is nothing
-    from the fourth still period on (0.4 s). The default file, or `policy.command_hold: false`, holds
-    nothing."""
+def test_the_box_holds_what_the_file_asks_for_and_lets_go_at_rest(tmp_path):
+    """The file for real hands built asking for the hold (`path_shape_policy --hold`): in the box a
+    stroke's command is held as `CommandHold.apply` holds the unheld box's output, and once the hand
+    rests the command is nothing from the fourth still period on (0.4 s). With `policy.command_hold:
+    false`, or a file that asks for none (the shipped files), the box holds nothing."""
+    from rtcohand_drake.learning import path_shape_policy as psp
     from rtcohand_drake.learning.command_hold import hold_settings
     from rtcohand_drake.learning.policy_file import load_policy
     from rtcohand_drake.scenario import load_scenario
 
     rng = np.random.default_rng(6)
     pieces = _pieces(rng, path_shape=True)
-    held, c1 = _box("cchp_path_shape.pt", pieces)
-    plain, c2 = _box("cchp_path_shape.pt", pieces, command_hold=False)
+    asking = psp.build_path_shape_policy(models_dir() / "cchp_default.pt", tmp_path / "held.pt", hold=psp.HOLD_CHOSEN)
+    assert hold_settings(load_policy(asking)) == list(psp.HOLD_CHOSEN)
+    held, c1 = _box(asking, pieces)
+    plain, c2 = _box(asking, pieces, command_hold=False)
+    assert _box("cchp_path_shape.pt", pieces)[0].hold is None
     assert held.hold is not None and plain.hold is None
     np.testing.assert_allclose(held.hold.sizes, FULL, rtol=1e-6)  # the person's command sizes
     assert load_scenario("inspection").policy.command_hold is True
