@@ -32,7 +32,7 @@ still for a few periods, the command lets go of the gesture the policy just saw,
 memory still holds; the period the hand moves again, the gate is open. It only ever scales the
 command down, and the module is still fed its own mean.
 
-Where the policy file asks for it (its `command_hold` attribute: the file for real hands) and the
+Where the policy file asks for it (its `command_hold` attribute; the shipped files ask for none) and the
 scenario allows it (`policy.command_hold`), the command hold follows the release: once the output
 has pointed along one command for a few periods, part of that command is held at its full size
 until the output fades (`learning.command_hold`); it starts afresh on a resume.
@@ -99,7 +99,7 @@ class Policy:
     # faster. 1 = the policy's own output. The supervisor's limits apply as always.
     output_gain: float = 1.0
     # Hold a command the output keeps pointing along, where the policy file asks for it (its
-    # `command_hold` attribute: the file for real hands; rtcohand_drake.learning.command_hold);
+    # `command_hold` attribute; the shipped files ask for none: rtcohand_drake.learning.command_hold);
     # false: never.
     command_hold: bool = True
 
