@@ -1,7 +1,7 @@
 """The command hold: a read that keeps pointing along one command is held at that command's size.
 
 A read of a real hand points the right way through most of a gesture but at about half the
-command's size (docs/real_people.md, "Where in a gesture the read loses"): a kernel read of a
+command's size (docs/real_people.md, "The command hold"): a kernel read of a
 hand unlike every context step shrinks toward zero, and the least-squares blend that chose it
 shrinks further. The person keeps gesturing until the part arrives, so a read that is right and
 small makes the task slow. The hold lets the read decide once, and then keeps the decision:
@@ -55,6 +55,12 @@ class CommandHold:
             raise ValueError(f"command hold needs 0 <= low < high, steps >= 1 and share in [0, 1]; got high "
                              f"{self.high}, steps_on {self.steps_on}, low {self.low}, steps_off {self.steps_off}, "
                              f"share {self.share}")
+
+    @classmethod
+    def from_settings(cls, sizes, settings: Sequence[float]) -> "CommandHold":
+        """The hold of [high, steps_on, low, steps_off, share] (a policy file's `command_hold`)."""
+        high, steps_on, low, steps_off, share = (float(v) for v in settings)
+        return cls(sizes, high, int(steps_on), low, int(steps_off), share)
 
     @staticmethod
     def initial_state() -> np.ndarray:
@@ -113,5 +119,4 @@ def fit_hold(settings: Sequence[float] | None, pieces) -> CommandHold | None:
     labels = [np.nan_to_num(np.asarray(y, np.float64)).reshape(-1, 6) for _, y in pieces if y is not None]
     if not labels:
         return None
-    high, steps_on, low, steps_off, share = settings
-    return CommandHold(np.abs(np.concatenate(labels)).max(0), high, int(steps_on), low, int(steps_off), share)
+    return CommandHold.from_settings(np.abs(np.concatenate(labels)).max(0), settings)

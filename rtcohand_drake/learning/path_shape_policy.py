@@ -83,6 +83,7 @@ from torch import nn
 
 from rtcohand_drake.data.hand_features import FEATURE_DIM, PATH_SHAPE_DIM
 from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.learning.command_hold import CommandHold
 from rtcohand_drake.learning.export import WrappedPolicySteps, blend_and_gain
 
 # Chosen on the 10 recorded development people (docs/real_people.md, section 3).
@@ -145,8 +146,10 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             raise InputError(f"commit needs a share in [0, 1] and 0 <= low < high; got {tuple(commit)}")
         if not (0.0 <= match[0] <= 1.0 and match[1] >= 0 and match[2] > 0):
             raise InputError(f"match needs a share in [0, 1], a velocity weight >= 0 and tau > 0; got {tuple(match)}")
-        if len(hold) != 5 or not (0.0 <= hold[2] < hold[0] and hold[1] >= 1 and hold[3] >= 1 and 0.0 <= hold[4] <= 1.0):
-            raise InputError(f"hold needs 0 <= low < high, steps of at least 1 and a share in [0, 1]; got {tuple(hold)}")
+        try:  # the hold's own rule for its settings
+            CommandHold.from_settings([0.0] * 6, hold)
+        except (ValueError, TypeError) as err:
+            raise InputError(f"hold {tuple(hold)}: {err}") from None
         # The command hold the box applies to this file's output (learning.command_hold); share 0: none.
         self.command_hold = [float(v) for v in hold]
         if anchors < 2 or not 0.0 <= min_gain < 1.0:

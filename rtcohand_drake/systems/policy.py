@@ -35,7 +35,7 @@ command down, and the module is still fed its own mean.
 Where the policy file asks for it (its `command_hold` attribute; the shipped files ask for none) and the
 scenario allows it (`policy.command_hold`), the command hold follows the release: once the output
 has pointed along one command for a few periods, part of that command is held at its full size
-until the output fades (`learning.command_hold`); it starts afresh on a resume.
+until the output no longer points along it (`learning.command_hold`); it starts afresh on a resume.
 
 Input ports
   gesture_features (36) hand-part velocities, user frame (zeros when the hand is lost)

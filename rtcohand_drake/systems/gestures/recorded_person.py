@@ -255,11 +255,8 @@ class RecordedPerson(InspectingPerson):
         s.join_from = s.keypoints.copy()
         first = self._recording(s).keypoints[0]
         s.offset = s.join_from[list(PALM)].mean(axis=0) - first[list(PALM)].mean(axis=0)
-        s.join_s = max(self.hand.join_s, self._join_time(s.join_from, first + s.offset))
+        s.join_s = max(self.hand.join_s, join_time(s.join_from, first + s.offset, self.hand))
         s.hand, s.hand_since, s.frame = "join", t, 0
-
-    def _join_time(self, a: np.ndarray, b: np.ndarray) -> float:
-        return join_time(a, b, self.hand)
 
     def _to_rest(self, s: RecordedHandState, t: float) -> None:
         s.hand, s.held, s.stroke = "rest", s.keypoints.copy(), None
