@@ -186,9 +186,11 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     for i in (0, 1):
         other_a = float(np.clip(halves[1 - i][0] / halves[1 - i][1], 0.0, 1.0))
         blend_error += halves[i][2] - 2 * other_a * halves[i][0] + other_a ** 2 * halves[i][1]
-    used, fitted, gain = (float(v) for v in module.blend_choice(keys))
+    used, fitted, gain, cchp_error = (float(v) for v in module.blend_choice(keys))
     assert used == fitted == pytest.approx(expected, abs=2e-4)
     assert gain == pytest.approx(1.0 - blend_error / base, abs=2e-4)
+    # The CCHP's own squared error over those steps, as a share of commanding zero twist's.
+    assert cchp_error == pytest.approx(base / float((y_all ** 2).sum()), rel=1e-4)
 
 
 def test_bad_settings_and_wide_inner_files_are_one_line_errors(tmp_path):
@@ -269,7 +271,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert card["path_shape_read"] == {
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
-        "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN,
+        "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN, "min_cchp_error": psp.DEFAULT_MIN_CCHP_ERROR,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
         "features": card["path_shape_read"]["features"]}
@@ -279,7 +281,8 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert hold_settings(wide) is None and psp.DEFAULT_HOLD[4] == 0.0  # no command hold asked for (not shipped)
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
-    assert (wide.kernel_anchors, wide.min_gain) == (psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN)
+    assert (wide.kernel_anchors, wide.min_gain, wide.min_cchp_error) == (
+        psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, 0.0, 0.4)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
     assert (wide.match_share, wide.match_velocity_weight, wide.match_tau) == (0.25, 50.0, 0.05) == (
@@ -385,9 +388,10 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
     choices = {}
     for name, context in (("told", told), ("untold", untold)):
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
-        used, fitted, gain = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
+        used, fitted, gain, cchp_error = (float(v) for v in
+                                          open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
         assert used == fitted
-        choices[name] = (fitted, gain)
+        choices[name] = (fitted, gain, cchp_error)
     assert choices["told"][1] > 0.5 and choices["untold"][1] < choices["told"][1] - 0.3, choices
     gate = 0.5 * (choices["told"][1] + choices["untold"][1])
     gated = load_policy(build_path_shape_policy(inner_path, tmp_path / "gated.pt", bandwidth=0.6, lam=0.01,
@@ -396,8 +400,8 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
     for name, context in (("told", told), ("untold", untold)):
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
         keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
-        used, fitted, gain = (float(v) for v in gated.blend_choice(keys))
-        assert (fitted, gain) == pytest.approx(choices[name], abs=1e-6)
+        used, fitted, gain, cchp_error = (float(v) for v in gated.blend_choice(keys))
+        assert (fitted, gain, cchp_error) == pytest.approx(choices[name], abs=1e-6)
         assert used == (fitted if name == "told" else 0.0)
         if name == "untold":  # the CCHP alone, step by step
             inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c,
@@ -414,6 +418,52 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
                     assert torch.allclose(y, yi, atol=1e-7)
     with pytest.raises(InputError, match="min_gain"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_gain=1.0)
+
+
+def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_path):
+    """`--min-cchp-error E`: A as fitted when the CCHP alone, cross-validated over the person's own clips,
+    reads them with at least E of zero twist's squared error (`blend_choice`'s last entry, checked against
+    its definition above); else A = 0, and each step is the CCHP's own step exactly: mean, std, read and
+    attention."""
+    inner_path = _inner_policy(tmp_path)
+    inner = load_policy(inner_path)
+    rng = np.random.default_rng(11)
+    context = _pieces(rng, [14, 9, 12, 11, 8])
+    for x, y in context:  # labels that the path and shape tell, and the 36 motion features do not
+        y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH)
+    open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", **settings))
+    _, fitted, gain, cchp_error = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
+    assert fitted > 0.05 and cchp_error > 0.1
+    target = _pieces(rng, [10])[0][0]
+    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
+    for gate, kernel_used in ((cchp_error - 0.05, True), (cchp_error + 0.05, False)):
+        gated = load_policy(build_path_shape_policy(inner_path, tmp_path / f"gated{kernel_used}.pt",
+                                                    min_cchp_error=gate, **settings))
+        keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
+        used, *rest = (float(v) for v in gated.blend_choice(keys))
+        assert rest == pytest.approx([fitted, gain, cchp_error], abs=1e-6)
+        assert used == (fitted if kernel_used else 0.0)
+        H, Hi = int(gated.hidden_size), int(inner.hidden_size)
+        h, c, y, hi, ci, yi = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.zeros(Hi), torch.zeros(Hi), \
+            torch.zeros(6)
+        differs = False
+        with torch.no_grad():
+            for x in target:
+                x = torch.from_numpy(x)
+                y, std, h, c, attention = gated.step(x, y, h, c, keys, values, z_mu)
+                yi, std_i, hi, ci, read_i, _, query_i = inner.step_read(x[:FEATURE_DIM], yi, hi, ci, inner_keys,
+                                                                        inner_values, inner_z)
+                attention_i = inner.attention_of(query_i, inner_keys)
+                attention_i = attention_i.mean(0) if attention_i.dim() == 2 else attention_i
+                if kernel_used:
+                    differs = differs or not torch.equal(y, yi)
+                else:
+                    assert torch.equal(y, yi) and torch.equal(std, std_i) and torch.equal(attention, attention_i)
+        assert differs == kernel_used
+    with pytest.raises(InputError, match="min_cchp_error"):
+        build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_cchp_error=-0.1)
 
 
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):

@@ -108,15 +108,22 @@ MATCH_FRAME_DIM = 66  # the hand's shape about its centre (63) and the centre's 
 MATCH_COLUMNS = MATCH_FRAME_DIM + 1 + 6 + 2
 # The context steps the kernel read is fitted on, at most: a longer context is read from this many of its
 # steps, spread evenly over it, so that its solve, its keys and each step stay bounded (a 10,000-step
-# context: keys of K x D_in + ANCHORS^2 + O(K) floats and a step over ANCHORS steps, not K^2 and K). As many
-# as the match's state holds: every recorded person (900-1,470 steps at 10 Hz) and every simulated one
-# (72 clips, about 3,000 steps) is read from all of their steps, as before the anchors.
-DEFAULT_ANCHORS = MATCH_MAX_STEPS
+# context: keys of K x D_in + ANCHORS^2 + O(K) floats and a step over ANCHORS steps, not K^2 and K). 1,536:
+# every recorded person (900-1,470 steps at 10 Hz) is read from all of their steps, and a step at 10,000
+# context steps stays within the policy's budget (docs/policy.md); a simulated person (72 clips, about 3,000
+# steps), whom the CCHP reads, gets the CCHP alone (DEFAULT_MIN_CCHP_ERROR).
+DEFAULT_ANCHORS = 1536
 # With `--min-gain G`, a person's kernel read is used only when the fitted blend removes at least G of the
 # CCHP's squared error over their own clips. Off in the shipped file: gated at 0.2 (above every
 # development simulated person's share) the file read two of three held-out populations worse than the
 # CCHP alone (docs/policy.md).
 DEFAULT_MIN_GAIN = 0.0
+# The kernel read steps in only for a person whom the CCHP alone, cross-validated over their own clips, reads
+# with at least this share of zero twist's squared error; anyone else gets the CCHP alone, exactly. Chosen on
+# development people (docs/policy.md, "One file for every hand"): the CCHP's share was 0.10-0.18 for the 90
+# simulated people of populations 0 and 1 and up to 0.23 for our style families of population 7, and
+# 0.65-1.36 for the 10 recorded development people on every map.
+DEFAULT_MIN_CCHP_ERROR = 0.4
 # The command hold a file may ask the policy box for (learning.command_hold): [high, steps_on, low,
 # steps_off, share]; share 0: none. HOLD_CHOSEN was chosen on the recorded development people's held-out
 # gestures back to back through the run command; reported once it read every map better but drifted more
@@ -135,7 +142,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                  commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH),
                  match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
                  anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0,
-                 hold: Tuple[float, float, float, float, float] = NO_HOLD):
+                 hold: Tuple[float, float, float, float, float] = NO_HOLD, min_cchp_error: float = 0.0):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -152,11 +159,16 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             raise InputError(f"hold {tuple(hold)}: {err}") from None
         # The command hold the box applies to this file's output (learning.command_hold); share 0: none.
         self.command_hold = [float(v) for v in hold]
-        if anchors < 2 or not 0.0 <= min_gain < 1.0:
-            raise InputError(f"anchors must be at least 2 and min_gain in [0, 1); got {anchors}, {min_gain}")
+        if anchors < 2 or not 0.0 <= min_gain < 1.0 or not 0.0 <= min_cchp_error < 10.0:
+            raise InputError(f"anchors must be at least 2, min_gain in [0, 1) and min_cchp_error in [0, 10); "
+                             f"got {anchors}, {min_gain}, {min_cchp_error}")
         # A person's kernel read is used only if, over their own clips, the fitted blend removes at least
         # this share of the CCHP's squared error (else A = 0: the CCHP alone).
         self.min_gain = float(min_gain)
+        # ... and only if the CCHP alone, cross-validated over their own clips, reads them with at least this
+        # share of the squared error of commanding zero twist: the kernel read steps in only for a person whom
+        # the CCHP does not read (0: for anyone).
+        self.min_cchp_error = float(min_cchp_error)
         self.inner = inner
         self.kernel_anchors = int(anchors)  # the context steps the kernel read is fitted on, at most
         self.inner_hidden = int(inner.hidden_size)
@@ -198,8 +210,9 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         # Extras: the standardisation's mean and spread, b, A, [the command sizes], [the match frame's
         # mean and spread, and 1 where the context fits the match's state].
         self.match_extras_at = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
-        # ... and last, A as fitted and the share of the CCHP's error over the person's clips that it removes.
-        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0) + 2
+        # ... and last, A as fitted, the share of the CCHP's error over the person's clips that it removes, and
+        # the CCHP's own error there as a share of zero twist's.
+        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0) + 3
 
     def _anchors(self, k: int) -> int:
         """a: the context steps the kernel read is fitted on, of K."""
@@ -283,10 +296,12 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         blend = torch.full((1,), self.kernel_blend, dtype=torch.float64)
         fitted = torch.full((1,), self.kernel_blend, dtype=torch.float64)
         gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
+        cchp_error = torch.full((1,), -1.0, dtype=torch.float64)
         if self.blend_folds > 0 and x_c.size(0) > 1:
-            fitted_a, gain_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
-            fitted, gain = fitted_a.view(1), gain_a.view(1)
-            blend = fitted if float(gain_a) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
+            fitted_a, gain_a, cchp_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
+            fitted, gain, cchp_error = fitted_a.view(1), gain_a.view(1), cchp_a.view(1)
+            used = float(gain_a) >= self.min_gain and float(cchp_a) >= self.min_cchp_error
+            blend = fitted if used else torch.zeros(1, dtype=torch.float64)
         parts = [mean, spread, width.view(1), blend]
         if self.commit_share > 0:
             parts.append(sizes)
@@ -304,11 +319,11 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             parts += [f_mean, f_spread, fits]
             frames = (f - f_mean) / f_spread
             weighted_square = (frames * frames * self.match_weight.to(torch.float64)).sum(1, keepdim=True)
-            parts += [fitted, gain]
+            parts += [fitted, gain, cchp_error]
             own += [torch.cat(parts),
                     torch.cat([frames, weighted_square, y_all, position.view(-1, 1), clip.view(-1, 1)], 1).reshape(-1)]
         else:
-            own.append(torch.cat(parts + [fitted, gain]))
+            own.append(torch.cat(parts + [fitted, gain, cchp_error]))
         # One (K, D_in + ceil(own / K)) block whose memory is the CCHP's keys, then the kernel read's part:
         # each part is read as a view of it, without a copy.
         d_in = keys_in.size(1)
@@ -335,7 +350,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
 
     def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor, m_inv: torch.Tensor,
                                y_anchor: torch.Tensor, anchor: torch.Tensor, sizes: torch.Tensor
-                               ) -> Tuple[torch.Tensor, torch.Tensor]:
+                               ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """A in [0, 1] that best blends the two reads on the person's own clips, each clip read with
         the clips of the other folds as context (clip b is in fold b mod F): the CCHP stepped over
         the clip (its own mean fed back, z the prior mean), the kernel read from the exact
@@ -344,7 +359,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         context (every step, when each is an anchor). Returns (A, the gain): the gain is the share of
         the CCHP's squared error over those steps that the blend removes, cross-fitted so that it is not
         flattered by A's own fit: the clips stepped through are taken alternately into two halves, and
-        each half is read with the A fitted on the other."""
+        each half is read with the A fitted on the other. Last, the CCHP's own squared error over those
+        steps as a share of the labels' (of commanding zero twist's; -1 where there were none)."""
         n_rows = x_c.size(0)
         folds = min(self.blend_folds, n_rows)
         counts = m.sum(1)
@@ -356,6 +372,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         fitted_residual = torch.mm(m_inv, y_anchor)  # (M Y): the full solve's residuals, scaled
         stride = max(1, n_rows // self.blend_rows)
         sums = torch.zeros(n_rows, 3, dtype=torch.float64)  # per clip: (k - c).(y - c), |k - c|^2, |y - c|^2
+        label_square = torch.zeros((), dtype=torch.float64)  # |y|^2 over the same steps
         hi = self.inner_hidden
         for f in range(folds):
             out_rows: List[int] = []
@@ -395,9 +412,13 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                             sums[b, 0] += (gap * miss).sum()
                             sums[b, 1] += (gap * gap).sum()
                             sums[b, 2] += (miss * miss).sum()
+                            label_square += (y_anchor[j] * y_anchor[j]).sum()
+        cchp_error = sums[:, 2].sum() / label_square if float(label_square) > 0 else torch.full((), -1.0, dtype=torch.float64)
         if sums[:, 1].sum() <= 0:
-            return torch.full((), self.kernel_blend, dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64)
-        return blend_and_gain(sums, stride)
+            return (torch.full((), self.kernel_blend, dtype=torch.float64), torch.full((), -1.0, dtype=torch.float64),
+                    cchp_error)
+        fitted, gain = blend_and_gain(sums, stride)
+        return fitted, gain, cchp_error
 
     def _blend(self, keys: torch.Tensor) -> torch.Tensor:
         return self._blend_of(self._extras(keys))
@@ -409,9 +430,11 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
     @torch.jit.export
     def blend_choice(self, keys: torch.Tensor) -> torch.Tensor:
         """[A used, A as fitted, the share of the CCHP's squared error over the person's own clips that the
-        blend removes, cross-fitted (-1: not cross-validated)] for encoded keys."""
+        blend removes, cross-fitted, the CCHP's own squared error there as a share of zero twist's (-1: not
+        cross-validated)] for encoded keys."""
         extras = self._extras(keys)
-        return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 2], extras[self.extra_size - 1]])
+        return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 3], extras[self.extra_size - 2],
+                            extras[self.extra_size - 1]])
 
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
         """k (1, a) of a standardised query (1, shape_dim) against the anchors; `extras` is `_extras(keys)`.
@@ -437,12 +460,14 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         inner = self.inner.attention_of(query[:self.inner_query_size], self._inner_keys(keys))
         if inner.dim() == 2:
             inner = inner.mean(0)
+        a_blend = self._blend(keys)
+        if float(a_blend) == 0.0:  # the CCHP alone for this person
+            return inner
         kernel = torch.mm(self._kernel(query[self.inner_query_size:].view(1, -1), keys, self._extras(keys)),
                           self._anchor_part(keys, 0, a)).view(-1)
         if a < k:
             step_of = self._anchor_part(keys, a + self.shape_dim + 7, 1).view(-1).to(torch.int64)
             kernel = torch.zeros(k).index_add_(0, step_of, kernel)
-        a_blend = self._blend(keys)
         return a_blend * kernel + (1.0 - a_blend) * inner
 
     def _step(self, x_t: torch.Tensor, h: torch.Tensor, c: torch.Tensor, keys: torch.Tensor,
@@ -459,6 +484,12 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], self._inner_keys(keys), values, z)
         extras = self._extras(keys)
         q = self._standardise(x_t[self.motion_feature_dim:], extras)
+        a_blend = self._blend_of(extras)
+        if float(a_blend) == 0.0:
+            # The CCHP alone for this person (A = 0): its own step, exactly, without the kernel read's cost.
+            h_next = torch.cat([h2, mean_i, torch.zeros(self.match_max_steps)])
+            c_next = torch.cat([c2, torch.zeros(6 + self.match_max_steps)])
+            return (mean_i, std, h_next, c_next, read_i.mean(0).view(1, 6), v, torch.cat([query_i, q.view(-1)]))
         read_k = torch.mm(self._kernel(q, keys, extras), self._anchor_part(keys, a + self.shape_dim, 6))
         if self.commit_share > 0:
             read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]
@@ -475,7 +506,6 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                 length = torch.zeros(self.match_max_steps)
             h_next = torch.cat([h_next, cost])
             c_next = torch.cat([c_next, length])
-        a_blend = self._blend_of(extras)
         mean = a_blend * read_k + (1.0 - a_blend) * mean_i
         read = (a_blend * read_k + (1.0 - a_blend) * read_i.mean(0)).view(1, 6)
         return (mean, std, h_next, c_next, read, v, torch.cat([query_i, q.view(-1)]))
@@ -534,7 +564,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             commit: Tuple[float, float, float] = (DEFAULT_COMMIT_SHARE, COMMIT_LOW, COMMIT_HIGH),
                             match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
                             anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN,
-                            hold: Tuple[float, float, float, float, float] = DEFAULT_HOLD) -> pathlib.Path:
+                            hold: Tuple[float, float, float, float, float] = DEFAULT_HOLD,
+                            min_cchp_error: float = DEFAULT_MIN_CCHP_ERROR) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
@@ -548,10 +579,11 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
                                                           encoder_module, tuple(commit), tuple(match),
-                                                          anchors, min_gain, tuple(hold)).eval())
+                                                          anchors, min_gain, tuple(hold), min_cchp_error).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
+        "min_cchp_error": min_cchp_error,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
         **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
@@ -587,6 +619,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-gain", type=float, default=DEFAULT_MIN_GAIN,
                    help="use a person's kernel read only if the fitted blend removes at least this share of the "
                         "CCHP's squared error over their own clips")
+    p.add_argument("--min-cchp-error", type=float, default=DEFAULT_MIN_CCHP_ERROR,
+                   help="use a person's kernel read only if the CCHP alone, cross-validated over their own clips, "
+                        "reads them with at least this share of zero twist's squared error (0: for anyone)")
     p.add_argument("--hold", type=float, nargs=5, metavar=("HIGH", "STEPS_ON", "LOW", "STEPS_OFF", "SHARE"),
                    default=list(DEFAULT_HOLD),
                    help="ask the policy box to hold SHARE of a command at its full size once the output has pointed "
@@ -601,7 +636,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
                                   args.encoder, tuple(args.commit), tuple(args.match), args.anchors,
-                                  args.min_gain, tuple(args.hold))
+                                  args.min_gain, tuple(args.hold), args.min_cchp_error)
     print(f"wrote {out}")
     return 0
 
