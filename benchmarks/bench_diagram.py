@@ -44,7 +44,7 @@ from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
 from rtcohand_drake.cell.robot_files import models_dir
 from rtcohand_drake.repo_paths import repo_relative
 from rtcohand_drake.systems.gestures.simulated_person import make_builtin_person
-from rtcohand_drake.learning.policy_file import load_policy
+from rtcohand_drake.learning.policy_file import load_policy, reads_path_shape
 from rtcohand_drake.systems.policy import CchpPolicy
 from rtcohand_drake.scenario import load_scenario
 
@@ -52,7 +52,7 @@ from rtcohand_drake.scenario import load_scenario
 def real_time_factor(scenario, model, duration, repeats):
     factors = []
     for seed in range(repeats):
-        source, pieces = make_builtin_person(scenario, seed=seed)
+        source, pieces = make_builtin_person(scenario, seed=seed, path_shape=reads_path_shape(model))
         policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=seed)
         run = build_run_diagram(scenario, source=source, policy=policy)
         simulator = Simulator(run.diagram)
@@ -188,10 +188,14 @@ def main():
         path = Path(tmp) / "population.h5"
         write_dataset(path, generate_population(GeneratorConfig(), n_users=15, seed=0))
         clips = load_policy_clips(path)
+        # The context as the policy file reads it (with the hand's path and shape for a file that reads them);
+        # the replayed clips give the source its 36 features.
+        context_clips = load_policy_clips(path, path_shape=True) if reads_path_shape(model) else clips
     user = sorted({c.user for c in clips if c.group == "out-sample"})[0]
-    mine = [c for c in clips if c.user == user]
-    singles = [c for c in mine if len(c.active_dims) == 1][: args.clips]
-    pieces = [(c.features, c.labels) for c in mine if c not in singles]
+    mine = [i for i, c in enumerate(clips) if c.user == user]
+    chosen = [i for i in mine if len(clips[i].active_dims) == 1][: args.clips]
+    singles = [clips[i] for i in chosen]
+    pieces = [(context_clips[i].features, context_clips[i].labels) for i in mine if i not in chosen]
     traces = {"paper": [], "responsive": []}
     paper = onset_latencies(scenario, model, singles, pieces, "paper", traces["paper"])
     responsive = onset_latencies(scenario, model, singles, pieces, "responsive", traces["responsive"])

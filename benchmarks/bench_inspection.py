@@ -76,7 +76,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--model", default=None, help="policy file (default: the shipped models/cchp_default.pt)")
+    p.add_argument("--model", default=None, help="policy file (default: the scenario's policy.model, the shipped models/cchp_path_shape.pt)")
     p.add_argument("--scenario", default="inspection")
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--duration", type=float, default=120.0)
@@ -126,7 +126,7 @@ def _run(args) -> int:
         report = run_tasks(one, [(u, (u, args, out)) for u in args.users], workers=args.workers,
                            address=args.address, label="inspection")
         policy = (f"intended twist delayed {args.intent_delay} s (reference)" if args.intent
-                  else args.model or "models/cchp_default.pt")
+                  else args.model or f"models/{scenario.policy.model}")
         print(f"policy: {policy}; command filter: {scenario.command_filter.mode}; correction weight "
               f"{scenario.policy.correction_weight:g}; seed {args.seed}; limits {v_lim} m/s, {w_lim} rad/s")
         print("| user | faces | completion | mold (closest, mm) | cell (closest, mm) | peak v (m/s) | peak w (rad/s) "

@@ -58,9 +58,12 @@ def _gestures():
     from rtcohand_drake.systems.policy import CchpPolicy
     from rtcohand_drake.scenario import load_scenario
 
+    from rtcohand_drake.learning.policy_file import reads_path_shape
+
     scenario = load_scenario("inspection")
-    source, pieces = make_builtin_person(scenario, seed=0)
-    policy = CchpPolicy.from_scenario(models_dir() / scenario.policy.model, pieces, scenario.policy)
+    model = models_dir() / scenario.policy.model
+    source, pieces = make_builtin_person(scenario, seed=0, path_shape=reads_path_shape(model))
+    policy = CchpPolicy.from_scenario(model, pieces, scenario.policy)
     return build_run_diagram(scenario, source=source, policy=policy).diagram
 
 

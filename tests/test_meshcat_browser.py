@@ -9,6 +9,7 @@ from pydrake.geometry import Meshcat, MeshcatParams
 from pydrake.systems.analysis import Simulator
 
 from rtcohand_drake.browser import HEADLESS_FLAGS, find_chromium, screenshot
+from rtcohand_drake.learning.policy_file import reads_path_shape
 from rtcohand_drake.diagram import build_run_diagram
 from rtcohand_drake.scenario import load_scenario
 from rtcohand_drake.cell.plant import GEN3_LINKS
@@ -41,8 +42,9 @@ def test_meshcat_page_shows_the_gen3_during_a_run(tmp_path):
     chromium = find_chromium()
     meshcat = Meshcat(MeshcatParams(host="localhost", port=0))
     scenario = load_scenario("inspection")
-    source, pieces = make_builtin_person(scenario, seed=0)
-    policy = CchpPolicy(models_dir() / scenario.policy.model, pieces, scenario.policy.rate_hz, seed=0)
+    model = models_dir() / scenario.policy.model
+    source, pieces = make_builtin_person(scenario, seed=0, path_shape=reads_path_shape(model))
+    policy = CchpPolicy(model, pieces, scenario.policy.rate_hz, seed=0)
     run = build_run_diagram(scenario, source=source, policy=policy, meshcat=meshcat)
     simulator = Simulator(run.diagram)
     simulator.Initialize()

@@ -282,7 +282,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.kernel_anchors, wide.min_gain, wide.min_cchp_error) == (
-        psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, 0.0, 0.4)
+        psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, 0.0, 0.5)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
     assert (wide.match_share, wide.match_velocity_weight, wide.match_tau) == (0.25, 50.0, 0.05) == (

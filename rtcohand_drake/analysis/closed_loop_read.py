@@ -121,10 +121,14 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
     from rtcohand_drake.systems.inspection_monitor import until_done
     from rtcohand_drake.systems.policy import CchpPolicy
 
-    source, pieces = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed)
+    from rtcohand_drake.learning.policy_file import reads_path_shape
+
+    model = models_dir() / scenario.policy.model
+    source, pieces = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed,
+                                         path_shape=policy is None and reads_path_shape(model))
     rate = scenario.policy.rate_hz
     if policy is None:
-        policy = CchpPolicy.from_scenario(models_dir() / scenario.policy.model, pieces, scenario.policy, seed=seed)
+        policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=seed)
     gesture_source = "intent" if policy.HasInputPort(INTENDED_TWIST) else None
     run = build_run_diagram(scenario, source=source, policy=policy, gesture_source=gesture_source)
     simulator = Simulator(run.diagram)

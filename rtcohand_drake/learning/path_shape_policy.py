@@ -63,7 +63,8 @@ over the a = min(K, N) anchors, M (a, a), s (a, PATH_SHAPE_DIM or the embedding'
 |s|^2 (a) and each anchor's step in the context (a); then the extras (the standardisation's mean and
 spread, b and A, [the command sizes], [the match frames' mean, spread and fit], A as fitted and its
 gain); then, with the match, each context step's standardised frame (66), its weighted square sum,
-label (6), position in its clip and clip (K rows). A step costs O(N) for the kernel read and O(K) for
+label (6), position in its clip and clip (K rows); last, the CCHP's own error over the person's clips, as
+a share of zero twist's (`--min-cchp-error`). A step costs O(N) for the kernel read and O(K) for
 the match (on while K <= MATCH_MAX_STEPS), and the keys O(K D_in + N^2). The settings were chosen on
 recorded development people, the folds, the anchors and the gain also on development simulated
 populations (docs/real_people.md, section 3; docs/policy.md).
@@ -120,10 +121,10 @@ DEFAULT_ANCHORS = 1536
 DEFAULT_MIN_GAIN = 0.0
 # The kernel read steps in only for a person whom the CCHP alone, cross-validated over their own clips, reads
 # with at least this share of zero twist's squared error; anyone else gets the CCHP alone, exactly. Chosen on
-# development people (docs/policy.md, "One file for every hand"): the CCHP's share was 0.10-0.18 for the 90
-# simulated people of populations 0 and 1 and up to 0.23 for our style families of population 7, and
-# 0.65-1.36 for the 10 recorded development people on every map.
-DEFAULT_MIN_CCHP_ERROR = 0.4
+# development people (docs/policy.md, "One file for every hand"): the CCHP's share was 0.08-0.18 for the 90
+# simulated people of populations 0 and 1 (every 8th Own episode), 0.09-0.42 for two of our style families
+# of population 7, and 0.65-1.36 for the 10 recorded development people on every map: 0.5 lies between.
+DEFAULT_MIN_CCHP_ERROR = 0.5
 # The command hold a file may ask the policy box for (learning.command_hold): [high, steps_on, low,
 # steps_off, share]; share 0: none. HOLD_CHOSEN was chosen on the recorded development people's held-out
 # gestures back to back through the run command; reported once it read every map better but drifted more
@@ -210,9 +211,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         # Extras: the standardisation's mean and spread, b, A, [the command sizes], [the match frame's
         # mean and spread, and 1 where the context fits the match's state].
         self.match_extras_at = 2 * self.shape_dim + 2 + (6 if self.commit_share > 0 else 0)
-        # ... and last, A as fitted, the share of the CCHP's error over the person's clips that it removes, and
-        # the CCHP's own error there as a share of zero twist's.
-        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0) + 3
+        # ... and last, A as fitted and the share of the CCHP's error over the person's clips that it removes.
+        self.extra_size = self.match_extras_at + (2 * self.match_frame_dim + 1 if self.match_share > 0 else 0) + 2
 
     def _anchors(self, k: int) -> int:
         """a: the context steps the kernel read is fitted on, of K."""
@@ -221,7 +221,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
     def _own_size(self, k: int) -> int:
         """The floats of the kernel read's (and the match's) part of the keys, for K context steps."""
         a = self._anchors(k)
-        return a * (a + self.shape_dim + 8) + self.extra_size + (k * self.match_columns if self.match_share > 0 else 0)
+        return a * (a + self.shape_dim + 8) + self.extra_size + (k * self.match_columns if self.match_share > 0 else 0) + 1
 
     def _inner_keys(self, keys: torch.Tensor) -> torch.Tensor:
         """The CCHP's keys (K, D_in): the first K x D_in floats of the keys' memory (a view, no copy)."""
@@ -231,7 +231,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
 
     def _own(self, keys: torch.Tensor) -> torch.Tensor:
         """The kernel read's part of the keys' memory, flat (a view, no copy): M (a, a), s (a, shape_dim),
-        W (a, 6), |s|^2 (a), each anchor's step in the context (a), the extras, then the match's block."""
+        W (a, 6), |s|^2 (a), each anchor's step in the context (a), the extras, the match's block, then the
+        CCHP's own cross-validated error share (`blend_choice`)."""
         k = keys.size(0)
         start = keys.numel() - k * ((self._own_size(k) + k - 1) // k)
         return keys.reshape(-1)[start:start + self._own_size(k)]
@@ -319,11 +320,12 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             parts += [f_mean, f_spread, fits]
             frames = (f - f_mean) / f_spread
             weighted_square = (frames * frames * self.match_weight.to(torch.float64)).sum(1, keepdim=True)
-            parts += [fitted, gain, cchp_error]
+            parts += [fitted, gain]
             own += [torch.cat(parts),
                     torch.cat([frames, weighted_square, y_all, position.view(-1, 1), clip.view(-1, 1)], 1).reshape(-1)]
         else:
-            own.append(torch.cat(parts + [fitted, gain, cchp_error]))
+            own.append(torch.cat(parts + [fitted, gain]))
+        own.append(cchp_error)  # last, so that every part before it keeps its place in memory
         # One (K, D_in + ceil(own / K)) block whose memory is the CCHP's keys, then the kernel read's part:
         # each part is read as a view of it, without a copy.
         d_in = keys_in.size(1)
@@ -433,8 +435,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         blend removes, cross-fitted, the CCHP's own squared error there as a share of zero twist's (-1: not
         cross-validated)] for encoded keys."""
         extras = self._extras(keys)
-        return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 3], extras[self.extra_size - 2],
-                            extras[self.extra_size - 1]])
+        return torch.stack([extras[2 * self.shape_dim + 1], extras[self.extra_size - 2], extras[self.extra_size - 1],
+                            self._own(keys)[self._own_size(keys.size(0)) - 1]])
 
     def _kernel(self, q: torch.Tensor, keys: torch.Tensor, extras: torch.Tensor) -> torch.Tensor:
         """k (1, a) of a standardised query (1, shape_dim) against the anchors; `extras` is `_extras(keys)`.

@@ -60,3 +60,13 @@ def load_policy(path: os.PathLike):
         raise PolicyFileError(f"{path}: policy reads {int(module.feature_dim)} features; the hand features are "
                               f"{FEATURE_DIM}, or {FEATURE_DIM + PATH_SHAPE_DIM} with the hand's path and shape")
     return module
+
+
+def reads_path_shape(policy) -> bool:
+    """Whether a policy file (a path, or a module `load_policy` gave) reads the hand's path and shape after
+    the 36 hand-part velocities (`feature_dim` > 36, `learning.path_shape_policy`): its context pieces
+    must then be loaded with them (`to_policy_clip(path_shape=True)`)."""
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+
+    module = load_policy(policy) if isinstance(policy, (str, os.PathLike)) else policy
+    return int(module.feature_dim) > FEATURE_DIM
