@@ -47,7 +47,10 @@ def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator
     b = int(np.ceil(k / piece))
     f = int(policy.feature_dim)  # 36, or 351 for a file that reads the hand's path and shape
     x_c = torch.from_numpy(rng.normal(size=(b, piece, f)).astype(np.float32) * 0.2)
-    y_c = torch.from_numpy(rng.normal(size=(b, piece, 6)).astype(np.float32) * 0.1)
+    # Labels that the last 6 features tell (the hand's path and shape, for a file that reads them) and no
+    # file learned: a file that blends in a read of the person's own clips then uses it (A > 0), as for a
+    # recorded person, and the time is that of its full step.
+    y_c = 0.1 * torch.tanh(5.0 * x_c[:, :, -6:])
     mask = torch.zeros(b, piece, dtype=torch.bool)
     mask.view(-1)[:k] = True
     t0 = time.perf_counter()
@@ -55,6 +58,8 @@ def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator
     encode_s = time.perf_counter() - t0
     xs = torch.from_numpy(rng.normal(size=(steps + warmup, f)).astype(np.float32) * 0.2)
     result = {"K": k, "encode_context_s": encode_s}
+    if hasattr(policy, "blend_choice"):  # the blend of the file's own read it chose for this context
+        result["blend_choice"] = [float(v) for v in policy.blend_choice(keys)]
     methods = [("step", policy.step)] + ([("step_read", policy.step_read)] if hasattr(policy, "step_read") else [])
     for name, method in methods:
         h = torch.zeros(policy.hidden_size)
@@ -121,6 +126,8 @@ def main():
         print(f"CCHP step   K={k:6d}: p50 {r['p50']:.3f} ms  p99 {r['p99']:.3f} ms  (encode_context {r['encode_context_s']:.2f} s)")
         if "step_read" in r:
             print(f"  step_read K={k:6d}: p50 {r['step_read']['p50']:.3f} ms  p99 {r['step_read']['p99']:.3f} ms")
+        if "blend_choice" in r:
+            print(f"  blend     K={k:6d}: A {r['blend_choice'][0]:.3f} (the file's own read's share of its output)")
     gp = []
     for k in args.gp_lengths:
         r = bench_gp(k, 200, rng)

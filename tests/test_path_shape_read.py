@@ -752,3 +752,15 @@ def test_the_stroke_matched_by_a_time_warp_reads_as_its_definition(tmp_path):
     assert torch.allclose(y, y_a, atol=1e-6) and float(c[base:].abs().max()) == 0.0
     with pytest.raises(InputError, match="match needs"):
         build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", match=(0.5, 50.0, 0.0))
+
+
+def test_reads_path_shape_tells_a_file_that_needs_the_path_and_shape_in_its_context():
+    """Callers that build a context for a policy file ask this (`learning.policy_file.reads_path_shape`)."""
+    import pathlib
+
+    from rtcohand_drake.learning.policy_file import reads_path_shape
+
+    models = pathlib.Path(__file__).resolve().parents[1] / "models"
+    assert reads_path_shape(models / "cchp_path_shape.pt") and not reads_path_shape(models / "cchp_default.pt")
+    assert reads_path_shape(load_policy(models / "cchp_path_shape.pt"))
+    assert not reads_path_shape(str(models / "cchp_default.pt"))
