@@ -371,6 +371,27 @@ def test_a_long_context_is_read_from_anchors_spread_over_it(tmp_path):
         build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "bad.pt", anchors=1)
 
 
+def _beside_the_cchp(wide, inner, context, encoded, target):
+    """Steps a path-and-shape file (its `step` and `step_read`) and its inner CCHP (encoded on the context's
+    36 motion features) over the same target, each fed its own mean; yields per step ((mean, std, read,
+    attention) of the file, the same of the CCHP, its read and attention averaged over its heads)."""
+    x_c, y_c, mask = context
+    keys, values, z_mu = encoded
+    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
+    h, c, y = torch.zeros(int(wide.hidden_size)), torch.zeros(int(wide.hidden_size)), torch.zeros(6)
+    hi, ci, yi = torch.zeros(int(inner.hidden_size)), torch.zeros(int(inner.hidden_size)), torch.zeros(6)
+    with torch.no_grad():
+        for x in target:
+            x = torch.from_numpy(x)
+            read = wide.step_read(x, y, h, c, keys, values, z_mu)[4]
+            y, std, h, c, attention = wide.step(x, y, h, c, keys, values, z_mu)
+            yi, std_i, hi, ci, read_i, _, query_i = inner.step_read(x[:FEATURE_DIM], yi, hi, ci, inner_keys,
+                                                                    inner_values, inner_z)
+            attention_i = inner.attention_of(query_i, inner_keys)
+            attention_i = attention_i.mean(0) if attention_i.dim() == 2 else attention_i
+            yield (y, std, read, attention), (yi, std_i, read_i.mean(0).view(1, 6), attention_i)
+
+
 def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
     """`--min-gain G`: A as fitted when the blend removes at least G of the CCHP's squared error over the
     person's own clips (`blend_choice`; the share is checked against its definition above), else 0 and
@@ -404,18 +425,8 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
         assert (fitted, gain, cchp_error) == pytest.approx(choices[name], abs=1e-6)
         assert used == (fitted if name == "told" else 0.0)
         if name == "untold":  # the CCHP alone, step by step
-            inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c,
-                                                                         mask)
-            H, Hi = int(gated.hidden_size), int(inner.hidden_size)
-            h, c, y, hi, ci, yi = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.zeros(Hi), torch.zeros(Hi), \
-                torch.zeros(6)
-            with torch.no_grad():
-                for x in target:
-                    x = torch.from_numpy(x)
-                    y, _, h, c, _ = gated.step(x, y, h, c, keys, values, z_mu)
-                    yi, _, hi, ci, _, _, _ = inner.step_read(x[:FEATURE_DIM], yi, hi, ci, inner_keys, inner_values,
-                                                             inner_z)
-                    assert torch.allclose(y, yi, atol=1e-7)
+            for (y, *_), (yi, *_) in _beside_the_cchp(gated, inner, (x_c, y_c, mask), (keys, values, z_mu), target):
+                assert torch.allclose(y, yi, atol=1e-7)
     with pytest.raises(InputError, match="min_gain"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_gain=1.0)
 
@@ -423,8 +434,8 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
 def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_path):
     """`--min-cchp-error E`: A as fitted when the CCHP alone, cross-validated over the person's own clips,
     reads them with at least E of zero twist's squared error (`blend_choice`'s last entry, checked against
-    its definition above); else A = 0, and each step is the CCHP's own step exactly: mean, std, read and
-    attention."""
+    its definition above); `--min-blend B`: A as fitted when it is at least B. Else A = 0, and each step is
+    the CCHP's own step exactly: mean, std, read (its heads' mean) and attention."""
     inner_path = _inner_policy(tmp_path)
     inner = load_policy(inner_path)
     rng = np.random.default_rng(11)
@@ -432,38 +443,34 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
     for x, y in context:  # labels that the path and shape tell, and the 36 motion features do not
         y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
-    settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH)
+    settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0,
+                    min_blend=0.0)
     open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", **settings))
     _, fitted, gain, cchp_error = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
     assert fitted > 0.05 and cchp_error > 0.1
     target = _pieces(rng, [10])[0][0]
-    inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
-    for gate, kernel_used in ((cchp_error - 0.05, True), (cchp_error + 0.05, False)):
-        gated = load_policy(build_path_shape_policy(inner_path, tmp_path / f"gated{kernel_used}.pt",
-                                                    min_cchp_error=gate, **settings))
+    gates = ((dict(min_cchp_error=cchp_error - 0.05), True), (dict(min_cchp_error=cchp_error + 0.05), False),
+             (dict(min_cchp_error=cchp_error - 0.05, min_blend=fitted - 0.02), True),
+             (dict(min_cchp_error=cchp_error - 0.05, min_blend=fitted + 0.02), False))
+    for i, (gate, kernel_used) in enumerate(gates):
+        gated = load_policy(build_path_shape_policy(inner_path, tmp_path / f"gated{i}.pt", **{**settings, **gate}))
         keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
         used, *rest = (float(v) for v in gated.blend_choice(keys))
         assert rest == pytest.approx([fitted, gain, cchp_error], abs=1e-6)
         assert used == (fitted if kernel_used else 0.0)
-        H, Hi = int(gated.hidden_size), int(inner.hidden_size)
-        h, c, y, hi, ci, yi = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.zeros(Hi), torch.zeros(Hi), \
-            torch.zeros(6)
         differs = False
-        with torch.no_grad():
-            for x in target:
-                x = torch.from_numpy(x)
-                y, std, h, c, attention = gated.step(x, y, h, c, keys, values, z_mu)
-                yi, std_i, hi, ci, read_i, _, query_i = inner.step_read(x[:FEATURE_DIM], yi, hi, ci, inner_keys,
-                                                                        inner_values, inner_z)
-                attention_i = inner.attention_of(query_i, inner_keys)
-                attention_i = attention_i.mean(0) if attention_i.dim() == 2 else attention_i
-                if kernel_used:
-                    differs = differs or not torch.equal(y, yi)
-                else:
-                    assert torch.equal(y, yi) and torch.equal(std, std_i) and torch.equal(attention, attention_i)
+        for (y, std, read, attention), (yi, std_i, read_i, attention_i) in _beside_the_cchp(
+                gated, inner, (x_c, y_c, mask), (keys, values, z_mu), target):
+            if kernel_used:
+                differs = differs or not torch.equal(y, yi)
+            else:
+                assert (torch.equal(y, yi) and torch.equal(std, std_i) and torch.equal(read, read_i)
+                        and torch.equal(attention, attention_i))
         assert differs == kernel_used
     with pytest.raises(InputError, match="min_cchp_error"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_cchp_error=-0.1)
+    with pytest.raises(InputError, match="min_blend"):
+        build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_blend=-0.5)
 
 
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):

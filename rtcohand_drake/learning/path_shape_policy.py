@@ -2,6 +2,7 @@
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
         [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--anchors N] [--min-gain G]
+        [--min-cchp-error E] [--min-blend B]
         [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--hold HIGH STEPS_ON LOW STEPS_OFF SHARE]
         [--encoder ENCODER.pt]
 
@@ -29,9 +30,12 @@ A is `--blend`, or with `--folds F` > 0 (the shipped file: 4) it is chosen for e
 context is encoded: the least-squares blend of the two reads over the person's own clips, each clip
 read with the other folds' clips as context (`_cross_validated_blend`). With `--min-gain G` that
 blend is used only for a person whose clips it reads with at least G less squared error than the
-CCHP alone; for anyone else A = 0 (`blend_choice` gives A, the fitted A and that share). The kernel
-read suits recorded people, whose few strokes differ in posture and path; the CCHP suits sustained
-motions and the simulated people it was trained on.
+CCHP alone; for anyone else A = 0 (`blend_choice` gives A, the fitted A and that share). With
+`--min-cchp-error E` (the shipped file: 0.5) it is used only for a person whom the CCHP alone reads
+with at least E of zero twist's squared error over their clips, and with `--min-blend B` (the shipped
+file: 0, any A) only where the fitted A is at least B; anyone else gets the CCHP's own step, exactly. The
+kernel read suits recorded people, whose few strokes differ in posture and path; the CCHP suits
+sustained motions and the simulated people it was trained on.
 
 With attention = A k M + (1 - A) attention_CCHP over the K context steps (the CCHP's `values`, which
 a CCHP with `label_lead` shifts that many steps on, are returned as they are; the kernel read reads
@@ -125,6 +129,12 @@ DEFAULT_MIN_GAIN = 0.0
 # simulated people of populations 0 and 1 (every 8th Own episode), 0.09-0.42 for two of our style families
 # of population 7, and 0.65-1.36 for the 10 recorded development people on every map: 0.5 lies between.
 DEFAULT_MIN_CCHP_ERROR = 0.5
+# With `--min-blend B`, the kernel read is used only where the blend fitted on the person's clips gives it at least
+# B (A): a small A is a small correction to a read that fits, its gain within the fit's noise. Off in the shipped
+# file: B = 0.35 (every recorded development person with a kernel read had A of 0.48 or more; the simulated
+# development people whom the CCHP reads with a share of 0.5 or more, 0.28 or less) gave one held-out simulated
+# person a kernel read that read them worse, so it was not the one default either (docs/policy.md).
+DEFAULT_MIN_BLEND = 0.0
 # The command hold a file may ask the policy box for (learning.command_hold): [high, steps_on, low,
 # steps_off, share]; share 0: none. HOLD_CHOSEN was chosen on the recorded development people's held-out
 # gestures back to back through the run command; reported once it read every map better but drifted more
@@ -143,7 +153,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                  commit: Tuple[float, float, float] = (0.0, COMMIT_LOW, COMMIT_HIGH),
                  match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
                  anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0,
-                 hold: Tuple[float, float, float, float, float] = NO_HOLD, min_cchp_error: float = 0.0):
+                 hold: Tuple[float, float, float, float, float] = NO_HOLD, min_cchp_error: float = 0.0,
+                 min_blend: float = 0.0):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -160,9 +171,9 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             raise InputError(f"hold {tuple(hold)}: {err}") from None
         # The command hold the box applies to this file's output (learning.command_hold); share 0: none.
         self.command_hold = [float(v) for v in hold]
-        if anchors < 2 or not 0.0 <= min_gain < 1.0 or not 0.0 <= min_cchp_error < 10.0:
-            raise InputError(f"anchors must be at least 2, min_gain in [0, 1) and min_cchp_error in [0, 10); "
-                             f"got {anchors}, {min_gain}, {min_cchp_error}")
+        if anchors < 2 or not 0.0 <= min_gain < 1.0 or not 0.0 <= min_cchp_error < 10.0 or not 0.0 <= min_blend < 10.0:
+            raise InputError(f"anchors must be at least 2, min_gain in [0, 1), min_cchp_error in [0, 10) and "
+                             f"min_blend in [0, 10); got {anchors}, {min_gain}, {min_cchp_error}, {min_blend}")
         # A person's kernel read is used only if, over their own clips, the fitted blend removes at least
         # this share of the CCHP's squared error (else A = 0: the CCHP alone).
         self.min_gain = float(min_gain)
@@ -170,6 +181,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         # share of the squared error of commanding zero twist: the kernel read steps in only for a person whom
         # the CCHP does not read (0: for anyone).
         self.min_cchp_error = float(min_cchp_error)
+        # ... and only if the fitted A is at least this (0: any A; above 1: nobody).
+        self.min_blend = float(min_blend)
         self.inner = inner
         self.kernel_anchors = int(anchors)  # the context steps the kernel read is fitted on, at most
         self.inner_hidden = int(inner.hidden_size)
@@ -301,7 +314,8 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         if self.blend_folds > 0 and x_c.size(0) > 1:
             fitted_a, gain_a, cchp_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
             fitted, gain, cchp_error = fitted_a.view(1), gain_a.view(1), cchp_a.view(1)
-            used = float(gain_a) >= self.min_gain and float(cchp_a) >= self.min_cchp_error
+            used = (float(gain_a) >= self.min_gain and float(cchp_a) >= self.min_cchp_error
+                    and float(fitted_a) >= self.min_blend)
             blend = fitted if used else torch.zeros(1, dtype=torch.float64)
         parts = [mean, spread, width.view(1), blend]
         if self.commit_share > 0:
@@ -567,7 +581,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             match: Tuple[float, float, float] = (DEFAULT_MATCH_SHARE, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
                             anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN,
                             hold: Tuple[float, float, float, float, float] = DEFAULT_HOLD,
-                            min_cchp_error: float = DEFAULT_MIN_CCHP_ERROR) -> pathlib.Path:
+                            min_cchp_error: float = DEFAULT_MIN_CCHP_ERROR,
+                            min_blend: float = DEFAULT_MIN_BLEND) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
@@ -581,11 +596,13 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
                                                           encoder_module, tuple(commit), tuple(match),
-                                                          anchors, min_gain, tuple(hold), min_cchp_error).eval())
+                                                          anchors, min_gain, tuple(hold), min_cchp_error,
+                                                          min_blend).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
         "min_cchp_error": min_cchp_error,
+        **({"min_blend": min_blend} if min_blend > 0 else {}),
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
         **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
@@ -624,6 +641,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-cchp-error", type=float, default=DEFAULT_MIN_CCHP_ERROR,
                    help="use a person's kernel read only if the CCHP alone, cross-validated over their own clips, "
                         "reads them with at least this share of zero twist's squared error (0: for anyone)")
+    p.add_argument("--min-blend", type=float, default=DEFAULT_MIN_BLEND,
+                   help="use a person's kernel read only if the blend fitted on their own clips gives it at least "
+                        "this share A (0: any A; above 1: the CCHP alone for everyone)")
     p.add_argument("--hold", type=float, nargs=5, metavar=("HIGH", "STEPS_ON", "LOW", "STEPS_OFF", "SHARE"),
                    default=list(DEFAULT_HOLD),
                    help="ask the policy box to hold SHARE of a command at its full size once the output has pointed "
@@ -638,7 +658,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
                                   args.encoder, tuple(args.commit), tuple(args.match), args.anchors,
-                                  args.min_gain, tuple(args.hold), args.min_cchp_error)
+                                  args.min_gain, tuple(args.hold), args.min_cchp_error, args.min_blend)
     print(f"wrote {out}")
     return 0
 
