@@ -76,7 +76,7 @@ def run_user_reference(user: str, args, out: Path) -> tuple[str, int, str]:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--model", default=None, help="policy file (default: the scenario's policy.model, the shipped models/cchp_path_shape.pt)")
+    p.add_argument("--model", default=None, help="policy file (default: the scenario's policy.model, the shipped models/cchp_default.pt)")
     p.add_argument("--scenario", default="inspection")
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--duration", type=float, default=120.0)

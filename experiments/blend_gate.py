@@ -45,13 +45,14 @@ def main(argv=None) -> int:
     wide_eps = evaluation_episodes(load_clips(args.data, 10.0, path_shape=True), args.setting, 0)[::args.every]
     rows = []
     for i, (e_n, e_w) in enumerate(zip(narrow_eps, wide_eps)):
-        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(e_w.context))
+        e_f = e_w if int(wide.feature_dim) > FEATURE_DIM else e_n  # the episode as FILE reads it
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(e_f.context))
         keys = wide.encode_context(x_c, y_c, mask)[0]
         used, fitted, gain = (float(v) for v in wide.blend_choice(keys)[:3])
         rows.append({"episode": i, "a_used": used, "a_fitted": fitted, "gain": gain,
                      "zero": float(np.mean(np.asarray(e_n.target.labels, np.float64) ** 2)),
                      "core": stepped_policy_mse(core, [e_w if int(core.feature_dim) > FEATURE_DIM else e_n])["mse"],
-                     "file": stepped_policy_mse(wide, [e_w])["mse"]})
+                     "file": stepped_policy_mse(wide, [e_f])["mse"]})
         r = rows[-1]
         print(f"  episode {i}: A {fitted:.3f}, gain {gain:.3f}; core {r['core'] / r['zero']:.3f}, "
               f"file {r['file'] / r['zero']:.3f}", flush=True)

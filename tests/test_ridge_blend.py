@@ -43,30 +43,36 @@ def _linear_person(rng, n_clips=12, steps=30, window=3):
     return pieces
 
 
-def _numpy_sums(inner, pieces, window, lam, folds, rows):
+def _led(y, lead):
+    """Each step's label `lead` steps on, the clip's last label held past its end."""
+    return np.vstack([y[lead:], np.repeat(y[-1:], min(lead, len(y)), 0)]) if lead else y
+
+
+def _numpy_sums(inner, pieces, window, lam, folds, rows, lead=0):
     """Per clip (gap . miss, |gap|^2, |miss|^2) as the module docstring defines them, written out: clip b
     in fold b mod F, read with the other folds' clips as context by the CCHP (stepped, its own mean fed
     back, z the prior mean) and by the ridge fitted on them; gap = ridge - CCHP, miss = label - CCHP,
-    over every step of every stride-th clip (other clips' rows zero)."""
+    over every step of every stride-th clip (other clips' rows zero). With `lead`, the ridge is fitted to
+    the labels that many steps on and the miss taken against them; the CCHP reads the labels as they are."""
     stride = max(1, len(pieces) // rows)
     sums = np.zeros((len(pieces), 3))
     for f in range(min(folds, len(pieces))):
         inside = [p for b, p in enumerate(pieces) if b % folds != f]
-        ridge = RidgeReference(window, lam).fit(inside)
+        ridge = RidgeReference(window, lam).fit([(x, _led(y, lead)) for x, y in inside])
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(inside))
         keys, values, z, _ = inner.encode_context(x_c, y_c, mask)
         for b, (x, y) in enumerate(pieces):
             if b % folds != f or b % stride:
                 continue
             own = _stepped(inner, x, keys, values, z)
-            gap, miss = ridge.predict(x) - own, y - own
+            gap, miss = ridge.predict(x) - own, _led(y, lead) - own
             sums[b] = [(gap * miss).sum(), (gap * gap).sum(), (miss * miss).sum()]
     return sums, stride
 
 
-def _numpy_blend(inner, pieces, window, lam, folds, rows):
+def _numpy_blend(inner, pieces, window, lam, folds, rows, lead=0):
     """B: the least-squares blend over the stepped clips."""
-    sums, _ = _numpy_sums(inner, pieces, window, lam, folds, rows)
+    sums, _ = _numpy_sums(inner, pieces, window, lam, folds, rows, lead)
     return float(np.clip(sums[:, 0].sum() / sums[:, 1].sum(), 0.0, 1.0))
 
 
@@ -84,21 +90,23 @@ def _numpy_gain(inner, pieces, window, lam, folds, rows):
     return removed / sums[:, 2].sum()
 
 
-def test_the_blend_reads_as_its_definition(tmp_path):
+@pytest.mark.parametrize("lead", [0, 2])
+def test_the_blend_reads_as_its_definition(tmp_path, lead):
+    """With `--lead L` the ridge is fitted to, and B chosen on, each context step's label L steps on."""
     rng = np.random.default_rng(0)
-    path = rbp.build_ridge_blend_policy(CORE, tmp_path / "blend.pt", window=3, lam=5.0, folds=3, rows=4)
+    path = rbp.build_ridge_blend_policy(CORE, tmp_path / "blend.pt", window=3, lam=5.0, folds=3, rows=4, lead=lead)
     blend, inner = load_policy(path), load_policy(CORE)
     pieces = _linear_person(rng, n_clips=8)
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
     keys, values, z, _ = blend.encode_context(x_c, y_c, mask)
     b = float(blend.blend_of(keys))
-    assert b == pytest.approx(_numpy_blend(inner, pieces, 3, 5.0, 3, 4), abs=2e-4)
+    assert b == pytest.approx(_numpy_blend(inner, pieces, 3, 5.0, 3, 4, lead), abs=2e-4)
     inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
     # The keys' memory starts with the inner file's keys, as they are.
     k, d_in = inner_keys.shape
     assert torch.equal(keys.reshape(-1)[:k * d_in].view(k, d_in), inner_keys) and torch.equal(values, inner_values)
     target, _ = _linear_person(rng, n_clips=1)[0]
-    expected = (b * RidgeReference(3, 5.0).fit(pieces).predict(target)
+    expected = (b * RidgeReference(3, 5.0).fit([(x, _led(y, lead)) for x, y in pieces]).predict(target)
                 + (1.0 - b) * _stepped(inner, target, inner_keys, inner_values, inner_z))
     np.testing.assert_allclose(_stepped(blend, target, keys, values, z), expected, atol=2e-4)
 
@@ -129,7 +137,7 @@ def test_building_on_a_blended_file_or_bad_settings_is_one_line(tmp_path):
     cli = [sys.executable, "-m", "rtcohand_drake.learning.ridge_blend_policy"]
     blended = rbp.build_ridge_blend_policy(CORE, tmp_path / "blend.pt")
     for args in (["--policy", str(blended)], ["--policy", str(CORE), "--lambda", "0"],
-                 ["--policy", str(tmp_path / "none.pt")]):
+                 ["--policy", str(CORE), "--lead", "-1"], ["--policy", str(tmp_path / "none.pt")]):
         run = subprocess.run(cli + args + ["--out", str(tmp_path / "x.pt")], capture_output=True, text=True)
         assert run.returncode == 2, run.stderr
         assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr

@@ -1,7 +1,7 @@
 """A policy file that blends an exported CCHP policy with a ridge read fitted to the person's own clips.
 
     python -m rtcohand_drake.learning.ridge_blend_policy --policy CCHP.pt --out FILE.pt
-        [--window 10] [--lambda 100] [--folds 4] [--rows 12] [--min-gain G]
+        [--window 10] [--lambda 100] [--folds 4] [--rows 12] [--min-gain G] [--lead L]
 
 Some people are read best by a linear map of their own recent hand motion: their gestures are
 steady and their map from gesture to command is unlike anything the CCHP learned from other
@@ -48,6 +48,7 @@ import torch
 from rtcohand_drake.data.hand_features import FEATURE_DIM
 from rtcohand_drake.errors import InputError, run_cli
 from rtcohand_drake.learning.export import WrappedPolicySteps, blend_and_gain
+from rtcohand_drake.learning.nets.cchp import lead_labels
 
 # The per-person ridge reference's settings (learning.ridge_reference, the `evaluate --ridge` default);
 # the folds and rows as the file for real hands chooses its blend (learning.path_shape_policy).
@@ -61,13 +62,13 @@ class RidgeBlendPolicy(WrappedPolicySteps):
     """The exported CCHP policy blended, per person, with a ridge read of their own clips."""
 
     def __init__(self, inner: torch.jit.ScriptModule, window: int = DEFAULT_WINDOW, lam: float = DEFAULT_LAMBDA,
-                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS, min_gain: float = 0.0):
+                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS, min_gain: float = 0.0, lead: int = 0):
         super().__init__()
         if int(inner.feature_dim) < FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features first and have step_read")
-        if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1 and 0.0 <= min_gain < 1.0):
-            raise InputError(f"window must be >= 1, lambda positive, folds >= 0, rows >= 1 and min_gain in [0, 1); "
-                             f"got {window}, {lam}, {folds}, {rows}, {min_gain}")
+        if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1 and 0.0 <= min_gain < 1.0 and lead >= 0):
+            raise InputError(f"window must be >= 1, lambda positive, folds >= 0, rows >= 1, min_gain in [0, 1) and "
+                             f"lead >= 0; got {window}, {lam}, {folds}, {rows}, {min_gain}, {lead}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         # The inner file reads every feature; the ridge reads the first 36, the hand-part velocities.
@@ -86,6 +87,10 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         # A person's ridge read is used only if, over their own clips, the fitted blend removes at least
         # this share of the inner read's squared error (else B = 0: the inner file alone).
         self.min_gain = float(min_gain)
+        # The ridge is fitted to, and the blend chosen on, each context step's label this many steps on (the
+        # clip's last label held past its end): 0, the label as recorded; a CCHP trained to lead the handler's
+        # lag reads labels `label_lead` steps on.
+        self.label_lead = int(lead)
         # Extras: the standardisation's mean and spread, W, mean(Y), B used, B as fitted and its gain.
         self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 3
 
@@ -118,7 +123,8 @@ class RidgeBlendPolicy(WrappedPolicySteps):
             n = int(m[b].sum())
             xs.append(self._windows(torch.nan_to_num(x_c[b, :n, :self.motion_feature_dim].to(torch.float64),
                                                      0.0, 0.0, 0.0)))
-            ys.append(torch.nan_to_num(y_c[b, :n].to(torch.float64), 0.0, 0.0, 0.0))
+            y = lead_labels(y_c[b:b + 1], m[b:b + 1], self.label_lead)[0, :n]
+            ys.append(torch.nan_to_num(y.to(torch.float64), 0.0, 0.0, 0.0))
         return torch.cat(xs), torch.cat(ys)
 
     def _fit(self, x: torch.Tensor, y: torch.Tensor
@@ -243,7 +249,7 @@ class RidgeBlendPolicy(WrappedPolicySteps):
 
 def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int = DEFAULT_WINDOW,
                              lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS,
-                             min_gain: float = 0.0) -> pathlib.Path:
+                             min_gain: float = 0.0, lead: int = 0) -> pathlib.Path:
     """Writes the blended policy file, its model card extended with the ridge read's settings."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
 
@@ -252,10 +258,10 @@ def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int 
         raise InputError(f"{policy}: already blends a ridge read; give the CCHP policy it was built from")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows, min_gain).eval())
+        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows, min_gain, lead).eval())
     card = dict(card, ridge_read={
         "inner_policy": pathlib.Path(policy).name, "window": window, "lambda": lam, "blend_folds": folds,
-        "blend_rows": rows, "min_gain": min_gain,
+        "blend_rows": rows, "min_gain": min_gain, **({"lead": lead} if lead > 0 else {}),
         "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; "
                 "blended with the CCHP by B chosen per person by folds of their clips"})
     return save_scripted(scripted, out, card)
@@ -274,12 +280,16 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-gain", type=float, default=0.0,
                    help="use a person's ridge read only if the fitted blend removes at least this share of the inner "
                         "read's squared error over their own clips (cross-fitted)")
+    p.add_argument("--lead", type=int, default=0,
+                   help="fit the ridge to, and choose the blend on, each step's label this many steps on (0: the "
+                        "label as recorded; the shipped CCHP is trained 2 steps on)")
     return p
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
-    out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows, args.min_gain)
+    out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows, args.min_gain,
+                                   args.lead)
     print(f"wrote {out}")
     return 0
 
