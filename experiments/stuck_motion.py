@@ -8,7 +8,9 @@ policy steps in which the person gestures (the label of the frame played over a 
 some axis: 0.12 m/s, 0.6 rad/s), the motion of each such step (the label's largest axis as a share of a full
 command, with its sign), the three motions gestured most, and per axis the policy's gain over those steps:
 the least-squares factor of its output (`policy/mean`) on the label, sum(mean y) / sum(y^2), over the steps
-where that axis is gestured (1: the label's size; at least 20 steps). With `--data` (the study's file of
+where that axis is gestured (1: the label's size; at least 20 steps). `study --recorded-people` reports
+the command gestured most in a run's last 60 s and the gain along it (`gesture_following.stuck_motion`);
+this looks further back and at every axis. With `--data` (the study's file of
 recorded people), the person's held-out recordings of the motion gestured most are also read alone, open
 loop, with their `split = train` clips as context, as `benchmarks/back_to_back_read.py` reads a clip by
 itself (the run's policy file, the rest release): the gain along the motion's axis over the steps where
@@ -22,38 +24,33 @@ import pathlib
 
 import numpy as np
 
-AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
-FULL = np.array([0.12] * 3 + [0.6] * 3)  # a full command: the importer's label magnitudes
+from rtcohand_drake.analysis.gesture_following import AXES, FULL_COMMAND
+
 SHARE = 0.2  # a gesture under way: a fifth of a full command
 
 
 def stuck(path: pathlib.Path, last_s: float) -> dict | None:
     """The figures of one run log (module docstring); None for a completed run."""
-    import h5py
+    from rtcohand_drake.run_log import read_run_log
 
-    with h5py.File(path, "r") as f:
-        if bool(f.attrs.get("completed", False)):
-            return None
-        t = f["gesture/time"][:]
-        label = f["gesture/intended"][:]
-        mean = f["policy/mean"][:]
-        faces = int(f.attrs.get("faces_inspected", 0))
-    n = min(len(t), len(label), len(mean))
-    keep = t[:n] > t[n - 1] - last_s if n else np.zeros(0, bool)
-    label, mean = label[:n][keep], mean[:n][keep]
-    size = np.abs(label) / FULL
+    log = read_run_log(path)
+    if log.completed:
+        return None
+    t, label, mean = log.gesture_time, log.gesture_intended, log.policy_mean
+    keep = t > t[-1] - last_s if len(t) else np.zeros(0, bool)
+    size = np.abs(label[keep]) / FULL_COMMAND
     gesturing = (size > SHARE).any(1)
     counts: dict[str, int] = {}
     for i in np.flatnonzero(gesturing):
         d = int(np.argmax(size[i]))
-        name = AXES[d] + ("+" if label[i, d] > 0 else "-")
+        name = AXES[d] + ("+" if label[keep][i, d] > 0 else "-")
         counts[name] = counts.get(name, 0) + 1
     gains = {}
     for d, axis in enumerate(AXES):
         on = size[:, d] > SHARE
         if on.sum() >= 20:
-            gains[axis] = float((mean[on, d] * label[on, d]).sum() / (label[on, d] ** 2).sum())
-    return {"faces": faces, "gesturing_steps": int(gesturing.sum()),
+            gains[axis] = float((mean[keep][on, d] * label[keep][on, d]).sum() / (label[keep][on, d] ** 2).sum())
+    return {"faces": int(log.faces_inspected), "gesturing_steps": int(gesturing.sum()), "model": log.model,
             "motions": sorted(counts.items(), key=lambda kv: -kv[1])[:3], "gains": gains}
 
 
@@ -84,7 +81,7 @@ def read_alone(data: pathlib.Path, person: str, motion: str, model: str) -> list
     d, sign = AXES.index(motion[:2]), (1.0 if motion[2] == "+" else -1.0)
     gains = []
     for features, labels, keypoints in single:
-        size = np.abs(labels) / FULL
+        size = np.abs(labels) / FULL_COMMAND
         if int(np.argmax(size.max(0))) != d or np.sign(labels[:, d].sum()) != sign:
             continue
         guarded = guard_stream(gate, np.nan_to_num(features), keypoints, 10.0)
@@ -109,12 +106,8 @@ def main(argv=None) -> int:
         gains = ", ".join(f"{a} {g:+.2f}" for a, g in r["gains"].items()) or "-"
         alone = ""
         if args.data is not None and r["motions"]:
-            import h5py
-
-            with h5py.File(path, "r") as f:
-                model = str(f.attrs.get("model", "models/cchp_path_shape.pt"))
             person = path.name.split("_")[0]
-            read = read_alone(args.data, person, r["motions"][0][0], model)
+            read = read_alone(args.data, person, r["motions"][0][0], r["model"])
             alone = f"; its held-out recording read alone: gain {', '.join(f'{g:+.2f}' for g in read) or '-'}"
         print(f"{path.name}: {r['faces']}/6 faces; last {args.last:.0f} s: {r['gesturing_steps']} gesturing steps "
               f"({motions}); the read's gain per axis: {gains}{alone}")

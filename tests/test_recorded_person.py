@@ -15,7 +15,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
-from rtcohand_drake.analysis.gesture_following import FULL_COMMAND, following_shares, workpiece_twist_U
+from rtcohand_drake.analysis.gesture_following import FULL_COMMAND, following_shares, stuck_motion, workpiece_twist_U
 from rtcohand_drake.cell.geometry import matrix_to_quaternion
 from rtcohand_drake.cell.plant import eye_position
 from rtcohand_drake.data.dataset import Clip, write_dataset
@@ -214,6 +214,29 @@ def test_wrong_way_and_drift_shares_against_a_written_out_count():
     assert drift == pytest.approx(10 / 125)
 
 
+def test_the_motion_a_run_is_stuck_on_against_a_written_out_count():
+    # Intended twist at 10 Hz over 100 s: Ty+ (0.12 m/s) in 40-46 s and 70-100 s, Rz- (0.6 rad/s) in 50-60 s,
+    # rest otherwise; the policy's output at 10 Hz, 50 ms after each intent sample: 0.012 m/s along Ty in
+    # the Ty+ spans (a tenth of the gesture), -0.3 rad/s about Z in the Rz- span.
+    t = np.arange(0.0, 100.0, 0.1)
+    intended = np.zeros((len(t), 6))
+    ty = ((t >= 40.0 - 1e-9) & (t < 46.0 - 1e-9)) | (t >= 70.0 - 1e-9)
+    rz = (t >= 50.0 - 1e-9) & (t < 60.0 - 1e-9)
+    intended[ty, 1], intended[rz, 5] = 0.12, -0.6
+    mean = np.zeros_like(intended)
+    mean[ty, 1], mean[rz, 5] = 0.012, -0.3
+    stuck = stuck_motion(t, intended, t + 0.05, mean)
+    # Written out: the last 60 s are the samples after 39.9 s (600 of them); Ty+ in 40-46 s (60) and
+    # 70-100 s (300), Rz- in 50-60 s (100). Ty+ is gestured most: 360 / 600 of the time. The output held at
+    # each sample is the one 50 ms before it (the previous sample's): over the Ty+ samples it is 0.012
+    # except at the first sample of each span (two samples read 0), so the gain is 358 x 0.012 x 0.12 /
+    # (360 x 0.12^2).
+    assert stuck["motion"] == "Ty+"
+    assert stuck["time_share"] == pytest.approx(360 / 600)
+    assert stuck["gain"] == pytest.approx(358 * 0.012 * 0.12 / (360 * 0.12 ** 2))
+    assert stuck_motion(t, np.zeros_like(intended), t, mean) is None  # no gesture in the last 60 s
+
+
 def test_workpiece_twist_in_the_user_frame():
     R_WU = RollPitchYaw(0.0, 0.0, np.pi / 2).ToRotationMatrix().matrix()  # U turned a quarter about Z
     t = np.arange(0.0, 1.0, 0.02)
@@ -243,10 +266,13 @@ def test_study_of_recorded_people_writes_each_run_with_its_shares(people, tmp_pa
         assert run["completed"] is False and run["faces"] < 6  # capped at 6 s
         assert run["contacts"] == 0 and run["limits_exceeded"] == []
         assert 0.0 <= run["wrong_way_share"] <= 1.0 and 0.0 <= run["drift_share"] <= 1.0
+        assert run["stuck"]["motion"][:2] in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")  # not done: what it was asking for
+        assert 0.0 < run["stuck"]["time_share"] <= 1.0
         assert data["results"]["p2"][condition]["0"] is None
     assert sorted(p.name for p in (out / "logs").glob("p1_*.h5")) == ["p1_intent_s0.h5", "p1_responsive_s0.h5"]
     text = (out / "study.md").read_text()
     assert "no held-out recording (split test) of Tz+" in text and "| p1 | intent | 0 |" in text
+    assert f"- p1 responsive run seed 0: {data['results']['p1']['responsive']['0']['stuck']['motion']} (" in text
 
 
 def test_study_of_recorded_people_runs_the_scenario_given(people, tmp_path):

@@ -19,6 +19,12 @@ velocity, the angular velocity about the centre).
   than `share` of a full command on any axis.
 
 A share with no time to take it of is None.
+
+`stuck_motion`, for a run that did not finish: over its last `last_s` (60 s),
+the command the person gestured most, the share of those seconds' samples
+spent on it, and the read's gain along it: sum(output x label) / sum(label^2)
+on its axis over those samples, the policy's output held at each sample
+(1: the label's size; 0: the part is not asked to move at all).
 """
 
 from __future__ import annotations
@@ -79,3 +85,33 @@ def run_log_following_shares(log, R_WU: np.ndarray) -> tuple[float | None, float
     """`following_shares` of a run log (`run_log.RunLog`) with the user frame's rotation R_WU."""
     times, twists = workpiece_twist_U(log.robot_time, log.robot_workpiece_pose, R_WU)
     return following_shares(times, twists, log.gesture_time, log.gesture_intended)
+
+
+AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+STUCK_WINDOW_S = 60.0
+
+
+def stuck_motion(intent_times: np.ndarray, intended: np.ndarray, policy_times: np.ndarray,
+                 policy_means: np.ndarray, last_s: float = STUCK_WINDOW_S) -> dict | None:
+    """{"motion" ("Ty+"), "time_share", "gain"} of a run's last `last_s` seconds (module doc); None when the
+    person gestured nothing then."""
+    intent_times, intended = np.asarray(intent_times, float), np.asarray(intended, float)
+    policy_times, policy_means = np.asarray(policy_times, float), np.asarray(policy_means, float)
+    if len(intent_times) == 0 or len(policy_times) == 0:
+        return None
+    window = intent_times > intent_times[-1] - last_s
+    a = intended[window]
+    k = np.searchsorted(policy_times, intent_times[window] + 1e-9, side="right") - 1  # the output held
+    out = np.where(k[:, None] >= 0, policy_means[np.clip(k, 0, None)], 0.0)
+    gesture = np.any(a != 0.0, axis=1)
+    if not gesture.any():
+        return None
+    axis = np.argmax(np.abs(a) / FULL_COMMAND, axis=1)
+    sign = np.sign(a[np.arange(len(a)), axis])
+    names = np.array([f"{AXES[d]}{'+' if s > 0 else '-'}" for d, s in zip(axis, sign)])
+    motions, counts = np.unique(names[gesture], return_counts=True)
+    motion = str(motions[np.argmax(counts)])
+    on = gesture & (names == motion)
+    d = AXES.index(motion[:2])
+    gain = float((out[on, d] * a[on, d]).sum() / (a[on, d] ** 2).sum())
+    return {"motion": motion, "time_share": float(on.sum() / len(a)), "gain": gain}

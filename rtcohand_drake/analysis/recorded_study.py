@@ -23,8 +23,11 @@ Each run is one task of `analysis.engine.run_tasks`. `DIR/study.json` holds
 plus `contacts` (the run log's mold and cell contact events: one for each of
 the two it touched), `limits_exceeded` (which limits the run went beyond:
 `analysis.inspection.limits_exceeded`), `wrong_way_share` and `drift_share`
-(`analysis.gesture_following`), or None for a run that failed with an error
-(a person with no held-out recording of a motion the inspection asked for).
+(`analysis.gesture_following`) and, for a run that did not finish, `stuck`
+(`gesture_following.stuck_motion`: the command gestured most in its last
+60 s and the read's gain along it), or None for a run that failed with an
+error (a person with no held-out recording of a motion the inspection asked
+for).
 `DIR/study.md` gives the table per person and the medians, and counts the
 pauses the pause hand sign made (`sign_pauses`): neither the simulated nor
 the recorded person means one, but some recorded gestures start or end in a
@@ -40,6 +43,8 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from rtcohand_drake.analysis.gesture_following import STUCK_WINDOW_S
 
 CONDITIONS = ("responsive", "paper", "intent")
 DEFAULT_CONDITIONS = ("responsive", "intent")
@@ -124,7 +129,7 @@ def run_recorded_condition(people_file: str, person: str, condition: str, out: s
 def summarise_recorded(path: str, scenario: str = "inspection") -> dict:
     """`analysis.study.summarise` of a run log, plus contacts, limits exceeded and the following shares
     (the limits and the user frame of `scenario`, the one the run used)."""
-    from rtcohand_drake.analysis.gesture_following import run_log_following_shares
+    from rtcohand_drake.analysis.gesture_following import run_log_following_shares, stuck_motion
     from rtcohand_drake.analysis.inspection import limits_exceeded
     from rtcohand_drake.analysis.study import summarise
     from rtcohand_drake.run_log import read_run_log
@@ -138,7 +143,9 @@ def summarise_recorded(path: str, scenario: str = "inspection") -> dict:
             "contacts": sum(e.kind in ("mold_contact", "cell_contact") for e in log.events),
             "limits_exceeded": limits_exceeded(loaded, log),
             "wrong_way_share": wrong_way, "drift_share": drift,
-            "sign_pauses": sum(e.kind == "pause" and "hand sign" in e.detail for e in log.events)}
+            "sign_pauses": sum(e.kind == "pause" and "hand sign" in e.detail for e in log.events),
+            "stuck": None if log.completed else stuck_motion(log.gesture_time, log.gesture_intended, log.policy_time,
+                                                             log.policy_mean)}
 
 
 def people_of(path) -> list[str]:
@@ -197,6 +204,14 @@ def markdown(results: dict, conditions: Sequence[str], cap_s: float, failed: Seq
         time = "-" if m["median_time_s"] is None else f"{m['median_time_s']:.1f} s"
         lines.append(f"- **{c}**: completed safely {m['completed_safely']}/{m['runs']}, time {time}{ratio}, "
                      f"wrong way {_pct(m['median_wrong_way_share'])}, drift {_pct(m['median_drift_share'])}")
+    stuck = [(person, c, seed, r["stuck"]) for c in conditions for person, runs in results.items()
+             for seed, r in sorted(runs.get(c, {}).items()) if r is not None and r.get("stuck")]
+    if stuck:
+        lines += ["", "Runs not finished: the command the person gestured most in the run's last "
+                      f"{STUCK_WINDOW_S:g} s, the share of that time, and the read's gain along it (1: the "
+                      "gesture's size; about 0: the part is not asked to move):", ""]
+        lines += [f"- {person} {c} run seed {seed}: {s['motion']} ({100 * s['time_share']:.0f} % of the time), "
+                  f"gain {s['gain']:+.2f}" for person, c, seed, s in stuck]
     if failed:
         lines += ["", f"Runs failed with an error after a retry ({len(failed)}):", ""]
         lines += [f"- {f['person']} {f['condition']} run seed {f['run_seed']}: {f['error']}" for f in failed]
