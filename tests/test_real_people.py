@@ -127,6 +127,28 @@ def test_whole_hand_map_makes_every_command_with_the_whole_hand(tree, tmp_path):
     assert run.returncode == 0 and "whole-hand map" in run.stdout
 
 
+def test_held_out_holds_out_the_last_repetitions_and_keeps_the_first_as_context(tree, tmp_path):
+    out = tmp_path / "two.h5"
+    run = _run("rtcohand_drake.data.import_shrec17", "--root", str(tree), "--out", str(out),
+               "--mapping", "whole-hand", "--subjects", "3", "--held-out", "2")
+    assert run.returncode == 0, run.stderr
+    own = [c for c in read_dataset(out) if c.user == "s03"]
+    by_variant: dict[str, dict[int, str]] = {}
+    for c in own:
+        by_variant.setdefault(c.clip_id[:5], {})[int(c.clip_id[6:])] = c.split
+    assert len(by_variant) == 12
+    assert all(splits == {1: "train", 2: "test", 3: "test"} for splits in by_variant.values())
+    # More than the repetitions there are: the first still stays context.
+    shrec.import_shrec17(tree, tmp_path / "all.h5", "whole-hand", subjects=[3], progress=False, held_out=REPS + 2)
+    every = [c for c in read_dataset(tmp_path / "all.h5") if c.user == "s03"]
+    assert {int(c.clip_id[6:]) for c in every if c.split == "train"} == {1}
+    with h5py.File(tmp_path / "all.h5") as f:
+        assert "last 5 repetitions" in json.loads(f.attrs["import"])["held_out"]
+    bad = _run("rtcohand_drake.data.import_shrec17", "--root", str(tree), "--out", str(tmp_path / "x.h5"),
+               "--held-out", "0")
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "--held-out" in bad.stderr
+
+
 def test_rest_noise_rests_the_hand_with_the_persons_own_jitter(tmp_path):
     """--rest-noise: each held frame is the held one plus successive offsets of the person's own
     jitter where their hand hardly moves (`rest_noise_of`: `hand_features.slow_noise` over their mapped

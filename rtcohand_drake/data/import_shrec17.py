@@ -40,7 +40,10 @@ What a recorded person becomes (docs/interfaces.md, recorded people):
   ``ramp_s`` at each end inside the gesture; zero over the rests.
 - **Splits.** Of each mapped variant, the last repetition is ``test`` (held
   out) and the others ``train`` (the person's context); a variant recorded
-  only once gives no held-out clip (its one clip is context). The
+  only once gives no held-out clip (its one clip is context). With
+  ``--held-out N`` the last N repetitions are held out, the first always
+  stays in the context; a recorded person (`run --gesture-source recorded`)
+  then cycles through them, as a person varies a gesture they repeat. The
   ``Person`` evaluation setting reads each person's test clips with their
   own train clips as context (`rtcohand_drake.data.sampling`).
 
@@ -227,8 +230,9 @@ def command_map(mapping: str, variants: Sequence[tuple[int, int]], subject: int,
 
 def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, int]], user: str, group: str,
                  rest_s: float, ramp_s: float, rest_noise: bool = False,
-                 rng: np.random.Generator | None = None) -> list[Clip]:
-    """One person's clips: each mapped variant's repetitions, the last one held out (split "test");
+                 rng: np.random.Generator | None = None, held_out: int = 1) -> list[Clip]:
+    """One person's clips: each mapped variant's repetitions, the last `held_out` of them held out (split
+    "test"; the first is always context);
     with `rest_noise`, the rests carry the person's jitter (`rest_noise_of` over their mapped
     sequences in order, `with_rest`), drawn by `rng`."""
     n_rest = int(round(rest_s * FPS))
@@ -240,9 +244,9 @@ def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, 
     for name, variant in mapping.items():
         dim, sign = COMMANDS[COMMAND_NAMES.index(name)]
         reps = sorted((q for q in sequences if q.variant == variant), key=lambda q: q.essai)
-        for q in reps:
+        for i, q in enumerate(reps):
             kp = skeletons[q.path]
-            split = "test" if (q is reps[-1] and len(reps) > 1) else "train"
+            split = "test" if i >= max(1, len(reps) - held_out) else "train"
             g, f = variant
             clips.append(Clip(
                 user=user, clip_id=f"g{g:02d}f{f}e{q.essai:02d}", group=group, split=split,
@@ -254,12 +258,14 @@ def person_clips(sequences: Sequence[Sequence17], mapping: dict[str, tuple[int, 
 
 def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Sequence[int] | None = None,
                    seed: int = 0, group: str = "out-sample", rest_s: float = 0.5, ramp_s: float = 0.2,
-                   progress: bool = True, rest_noise: bool = False) -> dict:
+                   progress: bool = True, rest_noise: bool = False, held_out: int = 1) -> dict:
     """Write `out` from the dataset under `root`; returns a summary (people, clips, held out)."""
     if mapping not in MAPPINGS:
         raise InputError(f"unknown mapping {mapping!r} (expected one of {', '.join(MAPPINGS)})")
     if not (rest_s >= 0 and ramp_s >= 0):
         raise InputError(f"--rest-s and --ramp-s must be >= 0, got {rest_s}, {ramp_s}")
+    if held_out < 1:
+        raise InputError(f"--held-out must be at least 1, got {held_out}")
     sequences = find_sequences(root)
     present = sorted({q.subject for q in sequences})
     wanted = present if not subjects else [int(s) for s in subjects]
@@ -279,14 +285,17 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
         cmap = command_map(mapping, [q.variant for q in own], s, seed)
         maps[user] = {c: f"G{g}F{f}" for c, (g, f) in cmap.items()}
         clips.extend(person_clips(own, cmap, user, group, rest_s, ramp_s, rest_noise,
-                                  np.random.default_rng([int(seed), int(s), 1])))
+                                  np.random.default_rng([int(seed), int(s), 1]), held_out))
     meta = {"source": "SHREC'17 track, 3D hand gesture skeletons (De Smedt et al., 3DOR 2017)",
             "mapping": mapping, "seed": int(seed), "rest_s": rest_s, "ramp_s": ramp_s, "fps": FPS,
             "rest": ("the held frames plus the person's own tracking jitter (--rest-noise)" if rest_noise
                      else "the first and last frames held still"),
             "translation_m_s": TRANSLATION_M_S, "rotation_rad_s": ROTATION_RAD_S,
             "axis_map": "X_U = x, Y_U = -z, Z_U = y (camera x right, y up, z depth toward the person)",
-            "held_out": "the last repetition of each mapped variant (split test); the others are context (train)"}
+            "held_out": ("the last repetition of each mapped variant (split test); the others are context (train)"
+                         if held_out == 1 else
+                         f"the last {held_out} repetitions of each mapped variant, the first always context "
+                         f"(split test); the others are context (train)")}
     write_dataset(out, clips, root_attrs={"import": json.dumps(meta)},
                   user_attrs={u: {"command_map": json.dumps(m)} for u, m in maps.items()})
     return {"people": len(wanted), "clips": len(clips), "held_out": sum(c.split == "test" for c in clips),
@@ -308,13 +317,16 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ramp-s", type=float, default=0.2, help="label ramp at each end of the gesture, s")
     p.add_argument("--rest-noise", action="store_true",
                    help="rest with the person's own tracking jitter, as a tracked hand does (default: held still)")
+    p.add_argument("--held-out", type=int, default=1, metavar="N",
+                   help="hold out each variant's last N repetitions (split test; the first always stays context); "
+                        "default 1")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     summary = import_shrec17(args.root, args.out, args.mapping, args.subjects, args.seed, args.group,
-                             args.rest_s, args.ramp_s, rest_noise=args.rest_noise)
+                             args.rest_s, args.ramp_s, rest_noise=args.rest_noise, held_out=args.held_out)
     print(f"wrote {args.out}: {summary['people']} people, {summary['clips']} clips, "
           f"{summary['held_out']} held out ({args.mapping} map)")
     return 0
