@@ -167,7 +167,8 @@ def _check_values(s: Scenario, source: str) -> None:
     need(sa.max_angular_speed_rad_s > 0, "safety.max_angular_speed_rad_s must be > 0")
     need(0 < sa.sensitivity_min <= sa.sensitivity_default <= sa.sensitivity_max,
          "safety: need 0 < sensitivity_min <= sensitivity_default <= sensitivity_max")
-    need(sa.max_plausible_feature > 0, "safety.max_plausible_feature must be > 0")
+    need(sa.max_plausible_feature > 0 and sa.max_plausible_angular_feature > 0,
+         "safety.max_plausible_feature and safety.max_plausible_angular_feature must be > 0")
     need(sa.pause_ramp_s > 0 and sa.stale_after_s > 0 and sa.lookahead_s >= 0,
          "safety: pause_ramp_s and stale_after_s must be > 0, lookahead_s >= 0")
     need(sa.max_linear_accel_m_s2 > 0 and sa.max_angular_accel_rad_s2 > 0,

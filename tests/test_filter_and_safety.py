@@ -260,3 +260,48 @@ def test_mold_exit_corridor_passes_only_motion_along_the_mold_axis():
     octx = off.CreateDefaultContext()
     cmd, _ = _advance(off, octx, Simulator(off, octx), 2.0, request=ask, pose=in_cavity)[-1]
     assert np.allclose(cmd, ask, atol=1e-9)
+
+
+def _finger_along_the_palm_across_axis(tilt_m: float, aside_m: float = 0.0) -> np.ndarray:
+    """21 keypoints (U): a flat hand whose index finger points along the palm frame's x axis (its
+    across axis), its tip `tilt_m` above or below the palm's plane and `aside_m` toward the fingers:
+    the finger frame's reference axis lines up with the finger itself."""
+    from rtcohand_drake.data.hand_features import part_frames
+
+    kp = np.zeros((21, 3))
+    for k, x in zip((5, 9, 13, 17), (0.03, 0.01, -0.01, -0.03)):  # MCPs across the palm, 8 cm ahead of the wrist
+        kp[k] = [x, 0.08, 0.0]
+        kp[k + 1:k + 4] = kp[k] + np.outer([1, 2, 3], [0.0, 0.025, 0.0])  # fingers straight ahead
+    kp[1:5] = [0.03, 0.02, 0.0] + np.outer([1, 2, 3, 4], [0.012, 0.01, 0.0])
+    palm = part_frames(kp)[0][0]  # columns e_x (across), e_y, e_z (the palm's normal)
+    kp[6:9] = kp[5] + np.outer([1, 2, 3], 0.025 * palm[:, 0] + aside_m / 3 * palm[:, 1] + tilt_m / 3 * palm[:, 2])
+    return kp
+
+
+def test_a_finger_frame_turning_half_a_turn_is_not_an_implausible_hand():
+    """Two poses 0.1 s apart whose index finger tips by 2 mm across its line with the palm's across axis
+    (and 0.2 mm aside): the finger's frame turns nearly half a turn, 29 rad/s (pi / 0.1 s is 31), while
+    the hand barely moves, as 1-1.5 % of the steps of real footage and recorded people do.
+    Not a fault; a linear velocity over 25 m/s, or a turn over 100 rad/s, is."""
+    from rtcohand_drake.data.hand_features import part_frames, part_velocities
+    from rtcohand_drake.interfaces import GESTURE_FEATURES
+    from rtcohand_drake.systems.safety.rules import plausible_features
+
+    (R0, o0), (R1, o1) = part_frames(_finger_along_the_palm_across_axis(0.001)), \
+        part_frames(_finger_along_the_palm_across_axis(-0.001, 0.0002))
+    x = part_velocities(R0, o0, R1, o1, 0.1)
+    turn = np.linalg.norm(x.reshape(6, 6)[:, 3:], axis=1)
+    assert turn[2] > 25.0 and np.abs(x.reshape(6, 6)[:, :3]).max() < 0.1  # the index finger's frame, nothing else
+    assert np.all(np.delete(turn, 2) < 1e-9)
+    assert plausible_features(x, Safety())
+    fast, spun = np.zeros(36), np.zeros(36)
+    fast[6] = 26.0  # the thumb's origin at 26 m/s
+    spun[3] = 150.0  # the palm turning at 150 rad/s
+    assert not plausible_features(fast, Safety()) and not plausible_features(spun, Safety())
+    assert not plausible_features(x, Safety(max_plausible_angular_feature=25.0))
+    for features, mode in ((x, Mode.RUNNING), (fast, Mode.WATCHDOG), (spun, Mode.WATCHDOG)):
+        s, ctx, sim = _supervisor(command_period=0.1)
+        s.GetInputPort(GESTURE_FEATURES).FixValue(ctx, features)
+        out = _advance(s, ctx, sim, 0.5, request=[0.05, 0, 0, 0, 0, 0.2])
+        assert out[-1][1][0] == mode
+        assert np.allclose(out[-1][0], [0.05, 0, 0, 0, 0, 0.2] if mode == Mode.RUNNING else 0.0, atol=1e-12)

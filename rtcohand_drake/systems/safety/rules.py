@@ -64,9 +64,17 @@ def remove_outward_component(v_W: np.ndarray, normal_W: np.ndarray) -> np.ndarra
 
 
 def plausible_features(x: np.ndarray, config: Safety) -> bool:
-    """Finite, and no hand part moving faster than a hand can (m/s or rad/s)."""
-    x = np.asarray(x, float)
-    return bool(np.isfinite(x).all() and (x.size == 0 or np.abs(x).max() <= config.max_plausible_feature))
+    """Finite, and no hand part moving faster than a hand can: each part's linear velocity (the first
+    three of its six values) within `max_plausible_feature` m/s, its angular velocity (the last three)
+    within `max_plausible_angular_feature` rad/s."""
+    x = np.asarray(x, float).reshape(-1)
+    if not np.isfinite(x).all():
+        return False
+    if x.size % 6:
+        return bool(x.size == 0 or np.abs(x).max() <= config.max_plausible_feature)
+    parts = np.abs(x).reshape(-1, 6)
+    return bool(parts[:, :3].max(initial=0.0) <= config.max_plausible_feature
+                and parts[:, 3:].max(initial=0.0) <= config.max_plausible_angular_feature)
 
 
 def mold_exit_position(p_W: np.ndarray, zones: Zones) -> np.ndarray | None:

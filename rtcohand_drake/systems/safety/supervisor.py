@@ -4,7 +4,8 @@ Every `period_s` it turns the filtered twist request into the twist command:
 
 1. watchdog: a gesture flagged invalid, older than `stale_after_s`, with a
    non-finite or physically implausible feature (a hand part faster than
-   `max_plausible_feature`), or a non-finite request, sets the target to zero,
+   `max_plausible_feature` m/s or `max_plausible_angular_feature` rad/s), or a
+   non-finite request, sets the target to zero,
    and the command decays to zero within one command period (linearly, from
    where it was);
 2. pause: the operator's pause brings the workpiece to rest over
