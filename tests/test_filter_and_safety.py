@@ -281,7 +281,7 @@ def _finger_along_the_palm_across_axis(tilt_m: float, aside_m: float = 0.0) -> n
 def test_a_finger_frame_turning_half_a_turn_is_not_an_implausible_hand():
     """Two poses 0.1 s apart whose index finger tips by 2 mm across its line with the palm's across axis
     (and 0.2 mm aside): the finger's frame turns nearly half a turn, 29 rad/s (pi / 0.1 s is 31), while
-    the hand barely moves, as 1-1.5 % of the steps of real footage and recorded people do.
+    the hand barely moves, as 1-1.5 % of the policy steps of real footage and recorded people do.
     Not a fault; a linear velocity over 25 m/s, or a turn over 100 rad/s, is."""
     from rtcohand_drake.data.hand_features import part_frames, part_velocities
     from rtcohand_drake.interfaces import GESTURE_FEATURES

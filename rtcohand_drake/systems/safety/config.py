@@ -28,10 +28,10 @@ class Safety:
     # rotation between two poses over their time apart (hand_features: |theta| < pi), so a finger's
     # frame that turns half a turn between two frames (the finger lined up with the palm's across
     # axis, which the frame is built from) reads up to pi / dt: 31 rad/s at 10 Hz, 63 rad/s for
-    # frames 0.05 s apart, while the hand itself is fine. 1.1 % of the policy steps of real camera
-    # footage (10 clips through MediaPipe) and 1.2-1.5 % of recorded people's (SHREC'17) reach
-    # 25 rad/s this way, with no linear velocity above 25 m/s. The limit sits above pi / dt for
-    # frames at least 0.032 s apart; a wrist turns at up to ~15 rad/s.
+    # frames 0.05 s apart, while the hand itself is fine. 4 of the 268 policy steps of real camera
+    # footage (10 clips through MediaPipe) and 1.0-1.5 % of recorded people's (SHREC'17) reach
+    # 25 rad/s this way, with no linear velocity above 4 m/s (experiments/implausible_features.py).
+    # The limit sits above pi / dt for frames at least 0.032 s apart; a wrist turns at up to ~15 rad/s.
     max_plausible_angular_feature: float = 100.0
     # Confidence scaling: the request is scaled by the policy's confidence, from the read's
     # predictive variance factor v = 1 + phi^T A phi (port read_variance): full speed up to
