@@ -67,13 +67,8 @@ def plausible_features(x: np.ndarray, config: Safety) -> bool:
     """Finite, and no hand part moving faster than a hand can: each part's linear velocity (the first
     three of its six values) within `max_plausible_feature` m/s, its angular velocity (the last three)
     within `max_plausible_angular_feature` rad/s."""
-    x = np.asarray(x, float).reshape(-1)
-    if not np.isfinite(x).all():
-        return False
-    if x.size % 6:
-        return bool(x.size == 0 or np.abs(x).max() <= config.max_plausible_feature)
-    parts = np.abs(x).reshape(-1, 6)
-    return bool(parts[:, :3].max(initial=0.0) <= config.max_plausible_feature
+    parts = np.abs(np.asarray(x, float)).reshape(-1, 6)  # the hand's parts, as hand_features lays them out
+    return bool(np.isfinite(parts).all() and parts[:, :3].max(initial=0.0) <= config.max_plausible_feature
                 and parts[:, 3:].max(initial=0.0) <= config.max_plausible_angular_feature)
 
 
