@@ -195,6 +195,23 @@ def test_single_stroke_users_stroke_out_and_back_and_others_are_drawn_as_before(
         assert np.abs(tr.intent[tr.envelope > 0.9, d]).min() > 0
 
 
+def test_direct_users_move_and_turn_the_hand_along_each_axis_with_the_signs_they_drew():
+    """`p_direct`: a direct user makes each move a move of the hand along its axis and each turn a turn of
+    the wrist about it, with the signs (mirroring, flips) they drew; the rest of their profile is drawn as
+    before (the choice is drawn last)."""
+    for k in range(6):
+        plain = make_user(CONFIG, "u", "in-sample", np.random.default_rng(k))
+        direct = make_user(replace(CONFIG, p_direct=1.0), "u", "in-sample", np.random.default_rng(k))
+        assert direct.speed_m_s == plain.speed_m_s and direct.mirrored == plain.mirrored
+        for d in range(6):
+            for s in (1, -1):
+                g, p0 = direct.gestures[(d, s)], plain.gestures[(d, s)]
+                assert (g.kind, g.axis) == (("move", d) if d < 3 else ("turn", d - 3))
+                assert g.sign == p0.sign  # the user's own sign for the motion, whatever gesture they drew
+    mixed = [make_user(replace(CONFIG, p_direct=0.0), "u", "in-sample", np.random.default_rng(k)) for k in range(20)]
+    assert any(g.kind not in ("move", "turn") for u in mixed for g in u.gestures.values())
+
+
 def test_tracking_glitches_shift_the_hand_on_a_few_frames_and_change_nothing_else():
     """`glitch_prob`: over a few frames the whole hand is off by a size within `glitch_m`; the labels,
     the clean hand and the other frames are as without glitches (the glitches are drawn last)."""

@@ -57,6 +57,9 @@ def make_parser() -> argparse.ArgumentParser:
     parser.add_argument("--repeated-rhythm-share", type=_share, default=GeneratorConfig.p_repeated_rhythm,
                         help="share of users who gesture in repeated strokes (default "
                              f"{GeneratorConfig.p_repeated_rhythm}); 0: every user moves steadily while gesturing")
+    parser.add_argument("--direct-share", type=_share, default=GeneratorConfig.p_direct,
+                        help="share of users who make every motion the direct way: a move of the hand along its "
+                             "axis, a turn of the wrist about its axis (default 0)")
     parser.add_argument("--recorded-tracking", action="store_true",
                         help="track the hands as recorded people's were: steadier frame to frame, with glitches of "
                              "centimetres now and then (GeneratorConfig's RECORDED_TRACKING; default: the "
@@ -69,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
 
     config = replace(GeneratorConfig(), fps=args.fps, p_single_stroke=args.single_stroke_share,
-                     p_repeated_rhythm=args.repeated_rhythm_share,
+                     p_repeated_rhythm=args.repeated_rhythm_share, p_direct=args.direct_share,
                      **(RECORDED_TRACKING if args.recorded_tracking else {}))
     start = time.perf_counter()
 

@@ -41,6 +41,11 @@ class GeneratorConfig:
     single_stroke_s: tuple[float, float] = (1.1, 2.5)  # the stroke's duration (recorded: 25-75 %)
     single_stroke_return: tuple[float, float] = (0.0, 1.0)  # how far back it comes (0 one way, 1 all the way)
     single_stroke_speed_gain: tuple[float, float] = (2.0, 4.0)  # peak speed against the user's steady speed
+    # Users who make every motion the direct way: each move a move of the hand along its axis, each turn a
+    # turn of the wrist about its axis (each dimension's first strategy), with the signs (mirroring, flips)
+    # they drew. A linear map of the hand's motion reads such a person closely. 0: nobody (the default
+    # population is unchanged).
+    p_direct: float = 0.0
     p_curled_posture: float = 0.3  # share of users who curl the fingers while gesturing
     p_turn_about_elbow: float = 0.35  # share of users who turn about the elbow (hand moves)
     elbow_offset_m: tuple[float, float] = (0.18, 0.26)  # elbow behind the wrist

@@ -203,7 +203,21 @@ def make_user(config: GeneratorConfig, user_id: str, group: str, rng: np.random.
         user.single_stroke = True
         user.stroke_return = u(config.single_stroke_return)
         user.stroke_speed_gain = u(config.single_stroke_speed_gain)
+    # Also drawn last, and only when some users gesture directly, for the same reason.
+    if config.p_direct > 0.0 and rng.random() < config.p_direct:
+        user.gestures = direct_gestures(user.gestures)
     return user
+
+
+def direct_gestures(gestures: dict[tuple[int, int], Gesture]) -> dict[tuple[int, int], Gesture]:
+    """The same motions made the direct way: dimension d's first strategy (a move along the axis, a turn
+    about it), each with the sign the user drew for it."""
+    out = {}
+    for (d, s), g in gestures.items():
+        kind, axis, _, _ = STRATEGIES[d][0]
+        flip = g.sign * s  # the sign the user drew for dimension d (mirroring and flips)
+        out[(d, s)] = Gesture(kind=kind, axis=axis, sign=s * flip)
+    return out
 
 
 # --------------------------------------------------------------------------- population
