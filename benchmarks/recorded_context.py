@@ -3,8 +3,8 @@
     python benchmarks/recorded_context.py [--users u10 u11 ...] [--population-seed 0] [--seed 0]
 
 For each simulated person: records a session with `python -m rtcohand_drake.record
---simulated-user` (18 clips, labels the cue's twist shifted by the protocol's label
-delay), then plays the person's
+--simulated-user --repeats 1` (one round: 18 clips, labels the cue's twist shifted by the protocol's
+label delay), then plays the person's
 held-out generated clips (the odd-numbered half of their 72) through the
 shipped policy with three contexts: the session's clips, the even-numbered
 half of their generated clips (36, handler labels), and 18 of those (the
@@ -56,7 +56,7 @@ def main() -> None:
             path = Path(tmp) / "session.h5"
             subprocess.run([sys.executable, "-m", "rtcohand_drake.record", "--out", str(path), "--user", "ME",
                             "--simulated-user", user, "--population-seed", str(args.population_seed),
-                            "--seed", str(args.seed), "--no-meshcat", "--no-check"],
+                            "--seed", str(args.seed), "--no-meshcat", "--no-check", "--repeats", "1"],
                            check=True, capture_output=True)
             session = [(c.features, c.labels) for c in load_policy_clips(path, 10.0)]
         generated = builtin_clips(user, 10.0, args.population_seed)

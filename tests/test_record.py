@@ -1,5 +1,6 @@
 """The recorder: a simulated person's session is a contract-valid dataset file with every one-motion clip."""
 
+import json
 import pathlib
 from dataclasses import replace as dc_replace
 
@@ -14,7 +15,8 @@ from rtcohand_drake.record import ONE_MOTIONS, TWO_MOTIONS, Protocol, cue_twist,
 
 def test_simulated_session_writes_a_contract_valid_file(tmp_path, capsys):
     out = tmp_path / "me.h5"
-    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check"]) == 0
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
+                 "--repeats", "1"]) == 0
     clips = read_dataset(out)  # the reader validates the whole file against the contract
     assert len(clips) == len(ONE_MOTIONS) + len(TWO_MOTIONS) and {c.user for c in clips} == {"ME"}
     one = [c for c in clips if len(c.active_dims) == 1]
@@ -36,7 +38,7 @@ def test_simulated_session_writes_a_contract_valid_file(tmp_path, capsys):
     # The same seed records the same session.
     again = tmp_path / "again.h5"
     main(["--out", str(again), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
-          "--only", "Tx+"])
+          "--only", "Tx+", "--repeats", "1"])
     assert np.array_equal(read_dataset(again)[0].keypoints, clips[0].keypoints, equal_nan=True)
 
 
@@ -47,7 +49,7 @@ def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
 
     out = tmp_path / "few.h5"
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
-                 "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
+                 "--only", "Tx+,Tx-,Rz+,Rz-", "--repeats", "1"]) == 0
     text = capsys.readouterr().out
     assert "| Tx+ | 1 |" in text and "| Rz- | 1 |" in text
     assert "policy cchp_path_shape.pt" in text  # a recording is a real person's: the file for real hands
@@ -57,18 +59,18 @@ def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
     threshold = (min(gains.values()) + max(gains.values())) / 2
     monkeypatch.setattr(context_reading, "READS", threshold)
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
-                 "--only", "Tx+,Tx-,Rz+,Rz-"]) == 0
+                 "--only", "Tx+,Tx-,Rz+,Rz-", "--repeats", "1"]) == 0
     text = capsys.readouterr().out
     weak = [m for m in ("Tx+", "Tx-", "Rz+", "Rz-") if gains[m] < threshold]
     assert 0 < len(weak) < 4
     again = tmp_path / "few_again.h5"
     assert f"read below half their size: {', '.join(weak)}" in text
-    assert (f"python -m rtcohand_drake.record --out {again} --user ME --style hold --only {','.join(weak)}"
-            in text)
+    assert (f"python -m rtcohand_drake.record --out {again} --user ME --style hold --only {','.join(weak)} "
+            "--repeats 1" in text)
     assert f"--context-file {out} {again} --context-user ME" in text
     monkeypatch.setattr(context_reading, "READS", -10.0)
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
-                 "--only", "Tx+,Rz-"]) == 0
+                 "--only", "Tx+,Rz-", "--repeats", "1"]) == 0
     text = capsys.readouterr().out
     assert "nothing to record again" in text and "--only" not in text.split("reading check:")[1]
 
@@ -78,9 +80,34 @@ def test_reading_check_uses_the_policy_file_given(tmp_path, capsys):
     out = tmp_path / "few.h5"
     model = pathlib.Path(__file__).resolve().parents[1] / "models" / "cchp_path_shape.pt"
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
-                 "--only", "Tx+,Tx-,Rz+,Rz-", "--model", str(model)]) == 0
+                 "--only", "Tx+,Tx-,Rz+,Rz-", "--model", str(model), "--repeats", "1"]) == 0
     text = capsys.readouterr().out
     assert "policy cchp_path_shape.pt" in text and "| Rz- | 1 |" in text
+
+
+def test_a_session_records_each_gesture_three_times_in_rounds(tmp_path):
+    """By default the 12 one-motion clips come three times over, in rounds, each a gesture of its own
+    (the simulated person draws each afresh), then the two-motion clips once; `--repeats` and `--only`
+    go together, and the file records the repeats."""
+    out = tmp_path / "me.h5"
+    assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check"]) == 0
+    clips = read_dataset(out)
+    names = [c.clip_id.split("_", 1)[1] for c in clips]
+    one = [motion_name(m) for m in ONE_MOTIONS]
+    assert names == one * 3 + [motion_name(m) for m in TWO_MOTIONS]
+    assert len({c.clip_id for c in clips}) == len(clips)
+    for k in range(len(one)):
+        first, second = clips[k].keypoints, clips[k + len(one)].keypoints
+        assert first.shape != second.shape or not np.array_equal(first, second, equal_nan=True)
+    with h5py.File(out) as f:
+        assert json.loads(f.attrs["recorder"])["repeats"] == 3
+    two = tmp_path / "two.h5"
+    assert main(["--out", str(two), "--user", "ME", "--simulated-user", "u10", "--no-meshcat", "--no-check",
+                 "--only", "Tx+,Rz-,Tx+Ty+", "--repeats", "2"]) == 0
+    assert [c.clip_id for c in read_dataset(two)] == ["00_Tx+", "01_Rz-", "02_Tx+", "03_Rz-", "04_Tx+Ty+"]
+    for bad in ("0", "11"):
+        with pytest.raises(InputError, match="--repeats must be from 1 to 10"):
+            main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--repeats", bad])
 
 
 def test_cue_and_only():
