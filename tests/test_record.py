@@ -70,7 +70,7 @@ def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
     assert f"--context-file {out} {again} --context-user ME" in text
     monkeypatch.setattr(context_reading, "READS", -10.0)
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
-                 "--only", "Tx+,Rz-", "--repeats", "1"]) == 0
+                 "--only", "Tx+,Rz-"]) == 0
     text = capsys.readouterr().out
     assert "nothing to record again" in text and "--only" not in text.split("reading check:")[1]
 
@@ -108,6 +108,25 @@ def test_a_session_records_each_gesture_three_times_in_rounds(tmp_path):
     for bad in ("0", "11"):
         with pytest.raises(InputError, match="--repeats must be from 1 to 10"):
             main(["--out", str(tmp_path / "x.h5"), "--user", "ME", "--simulated-user", "u10", "--repeats", bad])
+
+
+def test_the_check_names_gestures_with_fewer_than_three_recordings(tmp_path, capsys):
+    """The reading check names the one-motion gestures recorded fewer than `RECORDINGS` times (the
+    recorder's default rounds) and the command that records them again."""
+    from rtcohand_drake.analysis.context_reading import RECORDINGS
+    from rtcohand_drake.record import DEFAULT_REPEATS
+
+    assert RECORDINGS == DEFAULT_REPEATS
+    one = tmp_path / "one.h5"
+    assert main(["--out", str(one), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Rz-,Tx+Ty+", "--repeats", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "fewer than 3 recordings of: Tx+ (1), Rz- (1)." in text  # the two-motion clip is not counted
+    assert "python -m rtcohand_drake.record --only Tx+,Rz-)" in text
+    three = tmp_path / "three.h5"
+    assert main(["--out", str(three), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",
+                 "--only", "Tx+,Rz-"]) == 0
+    assert "fewer than" not in capsys.readouterr().out
 
 
 def test_cue_and_only():

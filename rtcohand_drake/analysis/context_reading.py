@@ -18,7 +18,9 @@ The table lists the 12 motions (dimension and sign) with the median gain of
 their clips, the same gain for a ridge regression fitted on the same folds
 (the fitted-to-the-person reference, the bar the policy must clear), and a verdict: `reads` (>= 0.5), `weak` (0.2 .. 0.5), `poor`
 (< 0.2, or the wrong way). A poorly read gesture is worth re-recording or
-replacing by a more distinct one before the session. The last lines give the
+replacing by a more distinct one before the session. A one-motion gesture
+with fewer than three recordings among the clips is named too: a person's
+read gains much from a second and third recording of each gesture. The last lines give the
 median gain over all clips and the held-out squared error of the output as a
 share of commanding zero twist (the "Own" evaluation setting, in six folds),
 for the policy and for the reference.
@@ -58,6 +60,14 @@ STROKE_STYLE_ADVICE = ("read by its shape but not by the policy: {motions}. You 
                        "(python -m rtcohand_drake.record --style hold --only {only}), or make each stroke "
                        "last as long as the part should move")
 ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
+# A person's read gains much from a second and third recording of each gesture (docs/real_people.md,
+# section 6, "Recordings of each gesture in the context"); the recorder makes this many
+# (`record.DEFAULT_REPEATS`), and the check names the one-motion gestures with fewer.
+RECORDINGS = 3
+FEW_ADVICE = ("fewer than {n} recordings of: {motions}. The policy reads you from your own examples: from one "
+              "recording of each gesture it read recorded people's held-out gestures at 0.69-0.79 of the error "
+              "of commanding zero twist, from three at 0.50-0.69. Record these again "
+              "(python -m rtcohand_drake.record --only {only}) and read both files as one context")
 
 
 @dc.dataclass
@@ -215,6 +225,22 @@ def motion_table(readings: Sequence[ClipReading]) -> list[tuple[str, int, float,
                 g = float(np.median(gains))
                 rows.append((motion_name(d, sign), len(gains), g, verdict(g)))
     return rows
+
+
+def recordings_per_motion(clips: Sequence[LabelledClip]) -> dict[str, int]:
+    """The one-motion clips of each motion (its name, "Tx+"): clips with one active dimension, the sign
+    of their label's largest value along it."""
+    counts: dict[str, int] = {}
+    for clip in clips:
+        if len(clip.active_dims) != 1:
+            continue
+        d = clip.active_dims[0]
+        label = np.asarray(clip.labels, float)[:, d]
+        if not np.any(label != 0):
+            continue
+        name = motion_name(d, 1 if label[np.argmax(np.abs(label))] > 0 else -1)
+        counts[name] = counts.get(name, 0) + 1
+    return counts
 
 
 def recording_style(path: Path) -> str:
@@ -397,6 +423,12 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
           + ")")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
+    counts = recordings_per_motion(clips)
+    few = [(name, counts[name]) for d in range(6) for name in [motion_name(d, 1), motion_name(d, -1)]
+           if 0 < counts.get(name, 0) < RECORDINGS]
+    if few:
+        print(FEW_ADVICE.format(n=RECORDINGS, motions=", ".join(f"{m} ({k})" for m, k in few),
+                                only=",".join(m for m, _ in few)))
     if real and scenario.policy.rest_release:  # a real person's clips: does the command let go at rest?
         from rtcohand_drake.learning.rest_release import fit_rest_release, release_advice
 
