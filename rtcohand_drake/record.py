@@ -266,7 +266,7 @@ def record_tracked(tracker, motions_list, protocol: Protocol, user: str, live: b
 
     for k, motions in enumerate(motions_list):
         name = motion_name(motions)
-        print(f"  {name}: {PROMPTS[protocol.style]}", flush=True)
+        print(f"  clip {k + 1} of {len(motions_list)}, {name}: {PROMPTS[protocol.style]}", flush=True)
         for n in range(int(np.ceil(protocol.countdown_s)), 0, -1):
             print(f"  {name}: {n} ...", flush=True)
             if view is not None:

@@ -173,7 +173,7 @@ class _FakeCamera:
 
 
 @pytest.mark.parametrize("labels", ["cue", "aruco"])
-def test_tracked_session_labels(labels):
+def test_tracked_session_labels(labels, capsys):
     from pydrake.geometry import Meshcat, MeshcatParams
 
     from rtcohand_drake.record import CueView, record_tracked
@@ -183,6 +183,8 @@ def test_tracked_session_labels(labels):
     clips = record_tracked(_FakeCamera(), [((0, 1),), ((5, -1),)], protocol, "ME", live=False, labels=labels,
                            view=view)
     assert [c.clip_id for c in clips] == ["00_Tx+", "01_Rz-"]
+    prompts = [line for line in capsys.readouterr().out.splitlines() if "gesture while" in line]
+    assert [line.split(":")[0].strip() for line in prompts] == ["clip 1 of 2, Tx+", "clip 2 of 2, Rz-"]
     for clip in clips:
         assert clip.num_frames == 90 and clip.fps == pytest.approx(30.0)
         assert np.all(np.isfinite(clip.keypoints)) and np.all(np.isfinite(clip.object_velocity))
