@@ -140,3 +140,44 @@ def test_the_check_reads_the_output_the_run_gives():
     """With correction weight w the output is r + w (mean - r); the stand-in's read r is zero."""
     readings = cr.held_out_readings(ScaledEcho(0.8), _clips(), folds=3, correction_weight=0.25)
     assert np.allclose([r.gain for r in readings], 0.2, atol=1e-5)
+
+
+def test_confusions_name_a_gesture_read_along_another_motion():
+    """`confusions`: the median over a gesture's clips of the read along each other motion, as a share of
+    the person's command on that axis, while the gesture is made; named from CONFUSED_SHARE up."""
+    clips = _clips()  # clip i: dimension i % 6, sign (-1)^(i // 6)
+    size = np.max([np.abs(c.labels).max(0) for c in clips], axis=0)  # the person's command on each axis
+    means = [np.zeros_like(c.labels) for c in clips]
+    means[0][:, 1] = 0.6 * size[1]  # Tx+ read along Ty+ by 0.6 of its size
+    means[6][:, 1] = 0.1 * size[1]  # Tx- barely
+    means[8][:, 3] = -0.4 * size[3]  # Tz- along Rx-
+    found = cr.confusions(clips, means)
+    assert [(a, b) for a, b, _ in found] == [("Tx+", "Ty+"), ("Tz-", "Rx-")]
+    assert [round(v, 3) for _, _, v in found] == [0.6, 0.4]
+    assert cr.confusions(clips, means, share=0.5) == [("Tx+", "Ty+", pytest.approx(0.6))]
+    assert cr.confusions(clips, [None] * len(clips)) == []  # nothing played, nothing named
+
+
+def test_the_check_names_two_commands_given_the_same_gesture(tmp_path, capsys):
+    """A person whose Ty+ clips are exactly their Tx+ clips (the same gesture for two commands): the file
+    for real hands reads each along the other, and the check says so; their own session does not."""
+    import dataclasses
+
+    from rtcohand_drake.data.dataset import read_dataset
+    from rtcohand_drake.record import main as record
+
+    session = tmp_path / "me.h5"
+    assert record(["--out", str(session), "--user", "ME", "--simulated-user", "u11", "--no-meshcat", "--no-check",
+                   "--only", "Tx+,Ty+,Rz+"]) == 0
+    clips = read_dataset(session)
+    cr.check(["--context-file", str(session), "--context-user", "ME", "--no-progress"])
+    assert "read as another motion" not in capsys.readouterr().out
+    swap = [1, 0, 2, 3, 4, 5]  # Tx's label moved to Ty
+    twins = [c for c in clips if not c.clip_id.endswith("Ty+")]
+    twins += [dataclasses.replace(c, clip_id=f"{90 + k}_Ty+", active_dims=np.array([1]),
+                                  object_velocity=c.object_velocity[:, swap])
+              for k, c in enumerate(c for c in clips if c.clip_id.endswith("Tx+"))]
+    write_dataset(tmp_path / "same.h5", twins)
+    cr.check(["--context-file", str(tmp_path / "same.h5"), "--context-user", "ME", "--no-progress"])
+    text = capsys.readouterr().out
+    assert "read as another motion: Tx+ as Ty+" in text and "Ty+ as Tx+" in text

@@ -20,7 +20,10 @@ their clips, the same gain for a ridge regression fitted on the same folds
 (< 0.2, or the wrong way). A poorly read gesture is worth re-recording or
 replacing by a more distinct one before the session. A one-motion gesture
 with fewer than three recordings among the clips is named too: a person's
-read gains much from a second and third recording of each gesture. The last lines give the
+read gains much from a second and third recording of each gesture. So is a
+gesture the read moves along another motion while it is made (a third of
+that motion's command or more, the median over its clips): to the read the
+two gestures look alike, as a whole-hand and a one-finger turn can. The last lines give the
 median gain over all clips and the held-out squared error of the output as a
 share of commanding zero twist (the "Own" evaluation setting, in six folds),
 for the policy and for the reference.
@@ -64,6 +67,14 @@ ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count a
 # section 6, "Recordings of each gesture in the context"); the recorder makes this many
 # (`record.DEFAULT_REPEATS`), and the check names the one-motion gestures with fewer.
 RECORDINGS = 3
+# A gesture is read as another when the read moves the part along that other motion by at least this share
+# of the person's command on its axis (median over the gesture's clips, while it is made). On the recorded
+# development people it names at most one pair a person (natural map s04: Ry+ as Rz-, the map's whole-hand
+# and one-finger turns), and none for simulated people u10 and u12.
+CONFUSED_SHARE = 0.3
+CONFUSED_ADVICE = ("read as another motion: {pairs}. While you make these gestures the arm also moves the "
+                   "other way named: to the read, your two gestures look alike. Make one of each pair more "
+                   "distinct (another motion of the hand, or another posture), or record more of both")
 FEW_ADVICE = ("fewer than {n} recordings of: {motions}. The policy reads you from your own examples: from one "
               "recording of each gesture it read recorded people's held-out gestures at 0.69-0.79 of the error "
               "of commanding zero twist, from three at 0.50-0.69. Record these again "
@@ -225,6 +236,41 @@ def motion_table(readings: Sequence[ClipReading]) -> list[tuple[str, int, float,
                 g = float(np.median(gains))
                 rows.append((motion_name(d, sign), len(gains), g, verdict(g)))
     return rows
+
+
+def confusions(clips: Sequence[LabelledClip], means: Sequence[np.ndarray | None],
+               share: float = None) -> list[tuple[str, str, float]]:
+    """(motion, the motion it is read as, how much) for each one-motion gesture whose played clips the
+    read moves, in the median over them, along another motion by at least `share` (CONFUSED_SHARE) of the
+    person's command on that axis (the largest label on it among the clips), over the steps where the
+    gesture's own label is active. Two gestures that look alike to the read."""
+    share = CONFUSED_SHARE if share is None else share
+    sizes = np.max([np.abs(np.asarray(c.labels, float)).max(0) for c in clips], axis=0)
+    crossed: dict[str, list[np.ndarray]] = {}
+    for clip, out in zip(clips, means):
+        if out is None or len(clip.active_dims) != 1:
+            continue
+        d = clip.active_dims[0]
+        label = np.asarray(clip.labels, float)[:, d]
+        peak = np.max(np.abs(label))
+        if peak <= 0:
+            continue
+        active = np.abs(label) > ACTIVE_SHARE * peak
+        along = np.where(sizes > 0, np.asarray(out, float)[active].mean(0) / np.where(sizes > 0, sizes, 1.0), 0.0)
+        along[d] = 0.0
+        crossed.setdefault(motion_name(d, 1 if label[active].mean() > 0 else -1), []).append(along)
+    found = []
+    for d in range(6):
+        for name in (motion_name(d, 1), motion_name(d, -1)):
+            if name not in crossed:
+                continue
+            rows = np.array(crossed[name])
+            for e in range(6):
+                for sign in (1, -1):
+                    level = float(np.median(np.maximum(sign * rows[:, e], 0.0)))
+                    if level >= share:
+                        found.append((name, motion_name(e, sign), level))
+    return found
 
 
 def recordings_per_motion(clips: Sequence[LabelledClip]) -> dict[str, int]:
@@ -423,6 +469,9 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
           + ")")
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
+    crossed = confusions(clips, means)
+    if crossed:
+        print(CONFUSED_ADVICE.format(pairs=", ".join(f"{a} as {b} ({v:.2f} of its size)" for a, b, v in crossed)))
     counts = recordings_per_motion(clips)
     few = [(name, counts[name]) for d in range(6) for name in [motion_name(d, 1), motion_name(d, -1)]
            if 0 < counts.get(name, 0) < RECORDINGS]
