@@ -69,7 +69,8 @@ def person_streams(clips, user: str, rate_hz: float, path_shape: bool):
     return [(p.features, p.labels) for p in context], single, stream
 
 
-def read_person(module, context, single, stream, rate_hz: float, release: bool, hold: bool = True) -> dict:
+def read_person(module, context, single, stream, rate_hz: float, release: bool, hold: bool = True,
+                label_lag_s: float = 0.0) -> dict:
     """The figures of one person (module docstring); with `release`, the output gated by the person's
     rest release (`learning.rest_release`) as the policy box gates it; with `hold`, then held as the
     box holds it where the file asks for it (`learning.command_hold`)."""
@@ -85,7 +86,7 @@ def read_person(module, context, single, stream, rate_hz: float, release: bool, 
     with torch.no_grad():
         keys, values, z_mu, _ = module.encode_context(torch.from_numpy(x_c), torch.from_numpy(y_c),
                                                       torch.from_numpy(mask))
-    gate = fit_rest_release(context)
+    gate = fit_rest_release(context, int(round(label_lag_s * rate_hz)))  # as the policy box fits it
     gate.on = gate.on and release
     held = fit_hold(hold_settings(module), context) if hold else None
     wide = int(module.feature_dim) > 36
@@ -139,7 +140,7 @@ def main(argv=None) -> int:
     import torch
     from tqdm import tqdm
 
-    from rtcohand_drake.data.dataset import read_dataset
+    from rtcohand_drake.data.dataset import label_lag_s, read_dataset
     from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.learning.policy_file import load_policy
 
@@ -155,7 +156,8 @@ def main(argv=None) -> int:
         for user in tqdm(users, desc=pathlib.Path(name).name, unit="person", file=sys.stderr):
             streams = person_streams(clips, user, args.rate_hz, wide)
             if streams is not None:
-                people[user] = read_person(module, *streams, args.rate_hz, not args.no_release, not args.no_hold)
+                people[user] = read_person(module, *streams, args.rate_hz, not args.no_release, not args.no_hold,
+                                           label_lag_s(args.data))
         s = summary(people)
         result["models"][pathlib.Path(name).name] = {"summary": s, "people": people}
         print(f"{pathlib.Path(name).name}: {s['people']} people; share of zero twist (all steps pooled / median "

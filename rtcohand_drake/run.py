@@ -162,16 +162,17 @@ def _build(args, scenario, meshcat, station=None):
 
 
 def _build_with_policy(args, scenario, meshcat, station, model, setup):
-    from rtcohand_drake.data.dataset import context_pieces, missing_motions
+    from rtcohand_drake.data.dataset import context_pieces, label_lag_s, missing_motions
     from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.diagram import build_run_diagram
     from rtcohand_drake.systems.policy import CchpPolicy
 
     rate = scenario.policy.rate_hz
     path_shape = int(model.feature_dim) > FEATURE_DIM  # a policy file that reads the hand's path and shape
-    user = None
+    user, lag = None, 0.0
     if args.context_file is not None:
         pieces, user = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
+        lag = label_lag_s(args.context_file)
     elif setup.default_context is not None:
         pieces = setup.default_context(path_shape=path_shape)
     else:
@@ -185,7 +186,7 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
                       "then add MORE.h5 to --context-file")
         print(f"warning: the context holds no example of {', '.join(missing)}, so gestures for them may be "
               f"read wrongly; record them: {record}", file=sys.stderr)
-    policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=args.seed)
+    policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=args.seed, label_lag_s=lag)
     from rtcohand_drake.learning.rest_release import release_advice
     from rtcohand_drake.systems.gestures.registry import reads_real_hands
 

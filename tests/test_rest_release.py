@@ -115,6 +115,37 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     assert "no rest between gestures" in rr.release_advice(rr.RestRelease())
 
 
+def test_labels_placed_later_than_the_gesture_are_fitted_where_the_gesture_is(tmp_path):
+    """A recorder session's labels follow the gesture by the protocol's `label_lag_s`: fitted as they are,
+    each outlasts the still hand and the release turns itself off; fitted with the lag, it is the release
+    of the same person with labels on the gesture, exactly. The lag comes from the recorder's file."""
+    import json
+
+    import h5py
+
+    from rtcohand_drake.data.dataset import label_lag_s
+
+    on_time = _pieces(np.random.default_rng(0))
+    lag = 4  # 0.4 s at RATE: the recorder's label_lag_s
+    late = [(x, np.vstack([np.zeros((lag, 6), np.float32), y[:-lag]])) for x, y in on_time]
+    assert not rr.fit_rest_release(late).on
+    fitted, reference = rr.fit_rest_release(late, lag), rr.fit_rest_release(on_time)
+    assert fitted.on and (fitted.theta, fitted.harm, fitted.floor) == (reference.theta, reference.harm, reference.floor)
+    # The policy box fits its release for the lag it is given (the run passes the context files' lag).
+    assert not CchpPolicy(models_dir() / "cchp_default.pt", late, RATE).release.on
+    box = CchpPolicy(models_dir() / "cchp_default.pt", late, RATE, label_lag_s=0.4)
+    assert box.release.on and box.release.theta == reference.theta
+    # label_lag_s: the recorder's protocol for cue labels; 0 for any other file.
+    path = tmp_path / "session.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["label_source"] = "cue"
+        f.attrs["recorder"] = json.dumps({"source": "camera 0", "protocol": {"label_lag_s": 0.4}})
+    assert label_lag_s(path) == 0.4 and label_lag_s([path, path]) == 0.4
+    with h5py.File(path, "r+") as f:
+        f.attrs["label_source"] = "aruco"
+    assert label_lag_s(path) == 0.0
+
+
 def _box(model, pieces, rest_release=True, command_hold=True):
     """The box with a file of models/ (a name) or any path."""
     policy = CchpPolicy(models_dir() / model, pieces, RATE, seed=0, rest_release=rest_release,

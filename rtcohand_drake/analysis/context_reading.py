@@ -482,7 +482,10 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
     if real and scenario.policy.rest_release:  # a real person's clips: does the command let go at rest?
         from rtcohand_drake.learning.rest_release import fit_rest_release, release_advice
 
-        release = fit_rest_release([(c.features, c.labels) for c in clips])
+        from rtcohand_drake.data.dataset import label_lag_s
+
+        lag = label_lag_s(args.context_file) if args.context_file else 0.0
+        release = fit_rest_release([(c.features, c.labels) for c in clips], int(round(lag * args.rate_hz)))
         print(release_advice(release) or (f"the rest release is on for these clips: the command lets go once the "
                                            f"hand has been still for {release.still_to / args.rate_hz:.1f} s"))
     poor = [name for name, _, gain, _ in rows if gain < WEAK]

@@ -22,6 +22,7 @@ problems of the file itself).
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from dataclasses import dataclass
@@ -475,6 +476,26 @@ def user_policy_clips(paths, user: str | None, rate_hz: float, path_shape: bool 
                              f"(users: {_some(sorted({c.user for c in clips}))})")
         mine += own
     return mine, user
+
+
+def label_lag_s(paths) -> float:
+    """How late the labels of these dataset files follow the gesture, s (the largest over the files): a
+    recorder session's cue labels are placed `label_delay_s` after the cue, of which the protocol's
+    `label_lag_s` is after the person's gesture (docs/interfaces.md, the recorder's attributes); 0 for
+    any other file (generated people's handler labels, imported recordings, ArUco labels)."""
+    import h5py
+
+    lag = 0.0
+    for path in as_paths(paths):
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("label_source") != "cue" or "recorder" not in f.attrs:
+                continue
+            try:
+                protocol = json.loads(f.attrs["recorder"]).get("protocol", {})
+                lag = max(lag, float(protocol.get("label_lag_s", 0.0)))
+            except (TypeError, ValueError, AttributeError):
+                raise DatasetError(f"{path}: root attribute 'recorder' is not the recorder's JSON") from None
+    return lag
 
 
 def context_pieces(paths, user: str | None, rate_hz: float, exclude=(), path_shape: bool = False):

@@ -22,7 +22,10 @@ Fitted to each person from their own labelled clips (`fit_rest_release`):
   resting hand whose jitter or drifting the context does not show (an imported recording whose rest
   is held exactly still) still reads as rest;
 - it is on only if even the smallest floor keeps within HARM: a person who commands with a still
-  hand (a held posture, or labels that outlast the motion) keeps the policy's output as it is.
+  hand (a held posture, or labels that outlast the motion) keeps the policy's output as it is;
+- labels known to follow the gesture by a lag (a recorder session's cue labels, placed the protocol's
+  `label_lag_s` after the gesture to match the lag the policy learned) are moved back onto the gesture
+  for the fit (`label_lag_steps`), so that their lag alone does not turn the release off.
 
 The gate only ever scales the command down; it reads the 36 features the policy reads, so a lost
 hand (zeros) counts as still. Everything it remembers is the still count n.
@@ -130,9 +133,22 @@ def _near_label(commanding: np.ndarray, margin: int) -> np.ndarray:
     return near
 
 
-def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]]) -> RestRelease:
-    """A person's rest release from their labelled context pieces [(features (T, >= 36), labels (T, 6))]."""
-    pieces = [(np.nan_to_num(np.asarray(f, np.float64)[:, :FEATURES]), np.nan_to_num(np.asarray(y, np.float64)))
+def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]], label_lag_steps: int = 0) -> RestRelease:
+    """A person's rest release from their labelled context pieces [(features (T, >= 36), labels (T, 6))].
+
+    `label_lag_steps`: how many policy steps the labels are known to follow the gesture (a recorder
+    session's cue labels, placed later to match the lag the policy learned: `label_lag_s` of the file's
+    protocol). The release is fitted with the labels moved that much earlier, back onto the gesture:
+    otherwise each label outlasts the still hand by the lag, the release takes the label's tail, and it
+    turns itself off for every such person. In the run it then lets go once the hand has been still
+    for a moment, before the lagged command's tail ends."""
+    lag = max(int(label_lag_steps), 0)
+
+    def aligned(y: np.ndarray) -> np.ndarray:
+        return np.vstack([y[lag:], np.zeros((min(lag, len(y)), y.shape[1]))]) if lag else y
+
+    pieces = [(np.nan_to_num(np.asarray(f, np.float64)[:, :FEATURES]),
+               aligned(np.nan_to_num(np.asarray(y, np.float64))))
               for f, y in pieces if y is not None and len(f) > 0]
     if not pieces:
         return RestRelease()

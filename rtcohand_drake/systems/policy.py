@@ -117,12 +117,13 @@ def blended_output(mean, read, correction_weight: float) -> np.ndarray:
 class CchpPolicy(LeafSystem):
     def __init__(self, model_path, context_pieces, rate_hz: float = 10.0, seed: int = 0,
                  correction_weight: float = 1.0, rest_release: bool = True, output_gain: float = 1.0,
-                 command_hold: bool = True):
+                 command_hold: bool = True, label_lag_s: float = 0.0):
         """`model_path`: an exported policy file, or a module already loaded by `load_policy`;
         `rest_release`: gate the output by the person's rest release (module docstring);
         `output_gain`: the output twist multiplied by it (scenario `policy.output_gain`);
         `command_hold`: hold a command the output keeps pointing along, where the file asks for it
-        (`learning.command_hold`)."""
+        (`learning.command_hold`); `label_lag_s`: how late the context's labels follow the gesture (a
+        recorder session's, `data.dataset.label_lag_s`), which the rest release is fitted for."""
         super().__init__()
         if not (np.isfinite(correction_weight) and 0.0 <= correction_weight <= 1.0):
             raise ValueError(f"correction_weight must be in [0, 1], got {correction_weight}")
@@ -150,7 +151,8 @@ class CchpPolicy(LeafSystem):
                                  " (a policy that reads the hand's path and shape needs context clips loaded "
                                  "with it: to_policy_clip(path_shape=True))" if self.feature_dim > FEATURE_DIM else ""))
         x_c, y_c, mask = pack_context(context_pieces)
-        self.release = fit_rest_release(context_pieces)  # the jump guard is always on; the gate as asked
+        # The jump guard is always on; the gate as asked.
+        self.release = fit_rest_release(context_pieces, int(round(float(label_lag_s) * rate_hz)))
         self.release.on = self.release.on and bool(rest_release)
         self.hold = fit_hold(hold_settings(self.module), context_pieces) if command_hold else None
         with torch.no_grad():
@@ -200,12 +202,13 @@ class CchpPolicy(LeafSystem):
         self.DeclareStateOutputPort(READ_VARIANCE, self._variance)
 
     @classmethod
-    def from_scenario(cls, model_path, context_pieces, policy: Policy, seed: int = 0) -> "CchpPolicy":
+    def from_scenario(cls, model_path, context_pieces, policy: Policy, seed: int = 0,
+                      label_lag_s: float = 0.0) -> "CchpPolicy":
         """The box with the scenario's `policy` settings (rate, correction weight, rest release, output gain,
-        command hold)."""
+        command hold); `label_lag_s` as for the constructor."""
         return cls(model_path, context_pieces, policy.rate_hz, seed=seed, correction_weight=policy.correction_weight,
                    rest_release=policy.rest_release, output_gain=policy.output_gain,
-                   command_hold=policy.command_hold)
+                   command_hold=policy.command_hold, label_lag_s=label_lag_s)
 
     def sample_z(self, resume_count: int) -> np.ndarray:
         """z ~ q(z|C), deterministic in (seed, resume_count)."""
