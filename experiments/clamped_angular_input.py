@@ -38,6 +38,7 @@ def clamp_angular(x: np.ndarray, limit: float) -> np.ndarray:
 def main(argv=None) -> int:
     import torch
 
+    from rtcohand_drake.analysis.context_reading import play_clip
     from rtcohand_drake.data.dataset import load_policy_clips
     from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.data.sampling import pack_context
@@ -53,7 +54,6 @@ def main(argv=None) -> int:
     module = load_policy(args.model)
     if int(module.feature_dim) != FEATURE_DIM:
         raise SystemExit(f"error: {args.model} does not read the 36 hand-part velocities alone")
-    hidden = int(module.hidden_size)
     clips = load_policy_clips(args.data, 10.0)
     people = []
     for person in args.people:
@@ -71,13 +71,9 @@ def main(argv=None) -> int:
             keys, values, z, _ = module.encode_context(x_c, y_c, m)
             sums = np.zeros(2)
             for x, y in held:
-                h, c, y_prev = torch.zeros(hidden), torch.zeros(hidden), torch.zeros(6)
-                out = []
-                for x_t in np.nan_to_num(clamp_angular(x, limit)):
-                    y_prev, _, h, c, _ = module.step(torch.from_numpy(x_t), y_prev, h, c, keys, values, z)
-                    out.append(y_prev.numpy())
+                out = play_clip(module, np.nan_to_num(clamp_angular(x, limit)), keys, values, z)
                 y = np.nan_to_num(np.asarray(y, np.float64))
-                sums += [np.sum((y - np.array(out, np.float64)) ** 2), np.sum(y ** 2)]
+                sums += [np.sum((y - out) ** 2), np.sum(y ** 2)]
             pooled += sums
             shares.append(sums[0] / sums[1])
         label = f"{limit:g} rad/s" if limit > 0 else "none"

@@ -8,7 +8,7 @@ imported SHREC'17 person has 2-5 of each in their context (`split = train`; the 
 out). For each R in `--repetitions` (0: all), each person's context keeps only the first R recordings
 of each gesture (its clip id's `gNNfN` part, in the order of their repetition number), and each of the
 person's held-out clips (`split = test`, the same for every R) is read alone by each policy file,
-stepped as the policy box steps it from a zero state (`learning.evaluate.stepped_policy_mse`). Prints,
+stepped as the policy box steps it from a zero state (`analysis.context_reading.play_clip`). Prints,
 per file and R, the squared error as a share of commanding zero twist, pooled over the people's clips,
 the median over people, and the context's mean size in clips.
 
@@ -37,6 +37,7 @@ def first_repetitions(clips, repetitions: int):
 def main(argv=None) -> int:
     import torch
 
+    from rtcohand_drake.analysis.context_reading import play_clip
     from rtcohand_drake.data.dataset import load_policy_clips
     from rtcohand_drake.data.sampling import pack_context
     from rtcohand_drake.learning.policy_file import load_policy
@@ -52,7 +53,6 @@ def main(argv=None) -> int:
     for path in args.models:
         module = load_policy(path)
         width = int(module.feature_dim)
-        hidden = int(module.hidden_size)
         for repetitions in args.repetitions:
             pooled = np.zeros(2)
             shares, sizes = [], []
@@ -67,13 +67,9 @@ def main(argv=None) -> int:
                 keys, values, z, _ = module.encode_context(x_c, y_c, m)
                 sums = np.zeros(2)
                 for c in held:
-                    h, cell, y_prev = torch.zeros(hidden), torch.zeros(hidden), torch.zeros(6)
-                    out = []
-                    for x_t in np.nan_to_num(np.asarray(c.features[:, :width], np.float32)):
-                        y_prev, _, h, cell, _ = module.step(torch.from_numpy(x_t), y_prev, h, cell, keys, values, z)
-                        out.append(y_prev.numpy())
+                    out = play_clip(module, np.nan_to_num(c.features[:, :width]), keys, values, z)
                     y = np.nan_to_num(np.asarray(c.labels, np.float64))
-                    sums += [np.sum((y - np.array(out, np.float64)) ** 2), np.sum(y ** 2)]
+                    sums += [np.sum((y - out) ** 2), np.sum(y ** 2)]
                 pooled += sums
                 shares.append(sums[0] / sums[1])
                 sizes.append(len(context))

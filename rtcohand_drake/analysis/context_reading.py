@@ -40,6 +40,7 @@ from typing import Sequence
 import numpy as np
 
 from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.record import DEFAULT_REPEATS
 
 MOTION_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 READS, WEAK = 0.5, 0.2  # verdict thresholds on the reading gain
@@ -64,9 +65,9 @@ STROKE_STYLE_ADVICE = ("read by its shape but not by the policy: {motions}. You 
                        "last as long as the part should move")
 ACTIVE_SHARE = 0.3  # steps where |label| exceeds this share of its peak count as the motion
 # A person's read gains much from a second and third recording of each gesture (docs/real_people.md,
-# section 6, "Recordings of each gesture in the context"); the recorder makes this many
-# (`record.DEFAULT_REPEATS`), and the check names the one-motion gestures with fewer.
-RECORDINGS = 3
+# section 6, "Recordings of each gesture in the context"); the recorder makes this many, and the check
+# names the one-motion gestures with fewer.
+RECORDINGS = DEFAULT_REPEATS
 # A gesture is read as another when the read moves the part along that other motion by at least this share
 # of the person's command on its axis (median over the gesture's clips, while it is made). On the 10 recorded
 # development people it names one pair for 9 of their 30 person-maps (2 whole-hand, 3 natural, among them
@@ -239,6 +240,20 @@ def motion_table(readings: Sequence[ClipReading]) -> list[tuple[str, int, float,
     return rows
 
 
+def one_motion(clip: LabelledClip) -> tuple[int, str, np.ndarray] | None:
+    """(its dimension, its motion's name "Tx+", the steps where its label is active) of a clip with one
+    active dimension and a label on it; None for any other clip."""
+    if len(clip.active_dims) != 1:
+        return None
+    d = clip.active_dims[0]
+    label = np.asarray(clip.labels, float)[:, d]
+    peak = np.max(np.abs(label))
+    if peak <= 0:
+        return None
+    active = np.abs(label) > ACTIVE_SHARE * peak
+    return d, motion_name(d, 1 if label[active].mean() > 0 else -1), active
+
+
 def confusions(clips: Sequence[LabelledClip], means: Sequence[np.ndarray | None],
                share: float = None) -> list[tuple[str, str, float]]:
     """(motion, the motion it is read as, how much) for each one-motion gesture whose played clips the
@@ -249,17 +264,13 @@ def confusions(clips: Sequence[LabelledClip], means: Sequence[np.ndarray | None]
     sizes = np.max([np.abs(np.asarray(c.labels, float)).max(0) for c in clips], axis=0)
     crossed: dict[str, list[np.ndarray]] = {}
     for clip, out in zip(clips, means):
-        if out is None or len(clip.active_dims) != 1:
+        motion = one_motion(clip) if out is not None else None
+        if motion is None:
             continue
-        d = clip.active_dims[0]
-        label = np.asarray(clip.labels, float)[:, d]
-        peak = np.max(np.abs(label))
-        if peak <= 0:
-            continue
-        active = np.abs(label) > ACTIVE_SHARE * peak
+        d, name, active = motion
         along = np.where(sizes > 0, np.asarray(out, float)[active].mean(0) / np.where(sizes > 0, sizes, 1.0), 0.0)
         along[d] = 0.0
-        crossed.setdefault(motion_name(d, 1 if label[active].mean() > 0 else -1), []).append(along)
+        crossed.setdefault(name, []).append(along)
     found = []
     for d in range(6):
         for name in (motion_name(d, 1), motion_name(d, -1)):
@@ -275,35 +286,23 @@ def confusions(clips: Sequence[LabelledClip], means: Sequence[np.ndarray | None]
 
 
 def recordings_per_motion(clips: Sequence[LabelledClip]) -> dict[str, int]:
-    """The one-motion clips of each motion (its name, "Tx+"): clips with one active dimension, the sign
-    of their label's largest value along it."""
+    """The one-motion clips of each motion (its name, "Tx+"; `one_motion`)."""
     counts: dict[str, int] = {}
-    for clip in clips:
-        if len(clip.active_dims) != 1:
-            continue
-        d = clip.active_dims[0]
-        label = np.asarray(clip.labels, float)[:, d]
-        if not np.any(label != 0):
-            continue
-        name = motion_name(d, 1 if label[np.argmax(np.abs(label))] > 0 else -1)
-        counts[name] = counts.get(name, 0) + 1
+    for motion in filter(None, map(one_motion, clips)):
+        counts[motion[1]] = counts.get(motion[1], 0) + 1
     return counts
 
 
 def recording_style(path: Path) -> str:
     """How the file's person gestured: the recorder's `protocol.style` ("hold" or "stroke"); "hold"
     for files the recorder did not write or written before the style was recorded."""
-    import json
-
-    import h5py
+    from rtcohand_drake.data.dataset import DatasetError, recorder_protocol
 
     try:
-        with h5py.File(path, "r") as f:
-            recorder = f.attrs.get("recorder")
-        protocol = json.loads(recorder).get("protocol", {}) if recorder is not None else {}
-    except (OSError, ValueError, AttributeError):
+        _, protocol = recorder_protocol(path)
+    except (OSError, DatasetError):
         return "hold"
-    return protocol.get("style", "hold") if isinstance(protocol, dict) else "hold"
+    return protocol.get("style", "hold")
 
 
 def clips_from_file(paths, user: str | None, rate_hz: float,
@@ -480,9 +479,8 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
         print(FEW_ADVICE.format(n=RECORDINGS, motions=", ".join(f"{m} ({k})" for m, k in few),
                                 only=",".join(m for m, _ in few)))
     if real and scenario.policy.rest_release:  # a real person's clips: does the command let go at rest?
-        from rtcohand_drake.learning.rest_release import fit_rest_release, release_advice
-
         from rtcohand_drake.data.dataset import label_lag_s
+        from rtcohand_drake.learning.rest_release import fit_rest_release, release_advice
 
         lag = label_lag_s(args.context_file) if args.context_file else 0.0
         release = fit_rest_release([(c.features, c.labels) for c in clips], int(round(lag * args.rate_hz)))

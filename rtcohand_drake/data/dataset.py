@@ -478,23 +478,39 @@ def user_policy_clips(paths, user: str | None, rate_hz: float, path_shape: bool 
     return mine, user
 
 
+def recorder_protocol(path) -> tuple[str | None, dict]:
+    """(the file's `label_source`, the recorder's `protocol`) of a dataset file (docs/interfaces.md, the
+    recorder's attributes); the protocol is {} for a file the recorder did not write. A `recorder`
+    attribute that is not the recorder's JSON is a `DatasetError`."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        source, recorder = f.attrs.get("label_source"), f.attrs.get("recorder")
+    if recorder is None:
+        return source, {}
+    try:
+        protocol = json.loads(recorder).get("protocol", {})
+    except (TypeError, ValueError, AttributeError):
+        protocol = None
+    if not isinstance(protocol, dict):
+        raise DatasetError(f"{path}: root attribute 'recorder' is not the recorder's JSON")
+    return source, protocol
+
+
 def label_lag_s(paths) -> float:
     """How late the labels of these dataset files follow the gesture, s (the largest over the files): a
     recorder session's cue labels are placed `label_delay_s` after the cue, of which the protocol's
     `label_lag_s` is after the person's gesture (docs/interfaces.md, the recorder's attributes); 0 for
     any other file (generated people's handler labels, imported recordings, ArUco labels)."""
-    import h5py
-
     lag = 0.0
     for path in as_paths(paths):
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("label_source") != "cue" or "recorder" not in f.attrs:
-                continue
-            try:
-                protocol = json.loads(f.attrs["recorder"]).get("protocol", {})
-                lag = max(lag, float(protocol.get("label_lag_s", 0.0)))
-            except (TypeError, ValueError, AttributeError):
-                raise DatasetError(f"{path}: root attribute 'recorder' is not the recorder's JSON") from None
+        source, protocol = recorder_protocol(path)
+        if source != "cue":
+            continue
+        try:
+            lag = max(lag, float(protocol.get("label_lag_s", 0.0)))
+        except (TypeError, ValueError):
+            raise DatasetError(f"{path}: root attribute 'recorder' is not the recorder's JSON") from None
     return lag
 
 
