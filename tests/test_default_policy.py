@@ -1,8 +1,8 @@
-"""Which policy file a command reads without --model: the scenario's `policy.model` for simulated
-people, its `policy.real_hand_model` (the file for real hands) for a real hand's skeleton: the camera,
-replay and recorded people of a file that is not a generated population, and the recorder's and
-context_reading's check of a real person's clips."""
+"""Which policy file a command reads without --model: the scenario's `policy.model`, one file for every
+source (simulated people, the camera, replay and recorded people, the recorder's and context_reading's
+check of a person's clips), unless `policy.real_hand_model` names another for a real hand's skeleton."""
 
+import dataclasses
 import pathlib
 from types import SimpleNamespace
 
@@ -31,31 +31,31 @@ def files(tmp_path_factory):
     return generated, recorded
 
 
-def test_a_real_hand_is_read_by_the_file_for_real_hands_and_a_simulated_one_by_the_default(files):
+def test_every_source_is_read_by_the_one_default_file_unless_a_file_for_real_hands_is_named(files):
     generated, recorded = files
     assert is_generated(generated) and not is_generated(recorded) and not is_generated(generated.parent / "none.h5")
     scenario = load_scenario("inspection")
-    assert (scenario.policy.model, scenario.policy.real_hand_model) == ("cchp_default.pt", "cchp_path_shape.pt")
-    expected = {("synthetic", None): "cchp_default.pt", ("camera", None): "cchp_path_shape.pt",
-                ("replay", generated): "cchp_default.pt", ("replay", recorded): "cchp_path_shape.pt",
-                ("recorded", generated): "cchp_default.pt", ("recorded", recorded): "cchp_path_shape.pt"}
-    for (source, gesture_file), name in expected.items():
-        assert reads_real_hands(source, gesture_file) == (name == "cchp_path_shape.pt"), source
+    assert (scenario.policy.model, scenario.policy.real_hand_model) == ("cchp_path_shape.pt", "")
+    real = {("synthetic", None): False, ("camera", None): True, ("replay", generated): False,
+            ("replay", recorded): True, ("recorded", generated): False, ("recorded", recorded): True}
+    for (source, gesture_file), is_real in real.items():
+        assert reads_real_hands(source, gesture_file) == is_real, source
         args = SimpleNamespace(model=None, gesture_source=source, gesture_file=gesture_file)
-        assert _resolve_model(args, scenario) == MODELS / name, (source, gesture_file)
+        assert _resolve_model(args, scenario) == MODELS / "cchp_path_shape.pt", (source, gesture_file)
         assert _resolve_model(SimpleNamespace(model=pathlib.Path("mine.pt"), gesture_source=source,
                                               gesture_file=gesture_file), scenario) == pathlib.Path("mine.pt")
+        named = dataclasses.replace(scenario, policy=dataclasses.replace(scenario.policy, model="cchp_default.pt",
+                                                                         real_hand_model="cchp_path_shape.pt"))
+        assert _resolve_model(args, named) == MODELS / ("cchp_path_shape.pt" if is_real else "cchp_default.pt")
     assert {n for n, e in GESTURE_SOURCES.items() if e.hands != "simulated"} == {"camera", "replay", "recorded"}
     # An empty real_hand_model: one file for every source.
     assert policy_model_name(SimpleNamespace(model="a.pt", real_hand_model=""), True) == "a.pt"
 
 
-def test_context_reading_checks_a_real_persons_clips_with_the_file_for_real_hands(files, capsys):
-    generated, recorded = files
-    user = "u10"
-    for path, name in ((recorded, "cchp_path_shape.pt"), (generated, "cchp_default.pt")):
+def test_context_reading_checks_every_persons_clips_with_the_one_default_file(files, capsys):
+    for path in files:
         with h5py.File(path) as f:
             user = sorted(f["users"])[0]
         assert run_cli(context_reading.main, ["--context-file", str(path), "--context-user", user, "--folds", "2",
                                               "--no-progress"]) == 0
-        assert f"policy {name}" in capsys.readouterr().out
+        assert "policy cchp_path_shape.pt" in capsys.readouterr().out

@@ -128,7 +128,7 @@ def test_policy_file_blends_the_cchp_with_a_kernel_read_of_the_context(tmp_path)
             y_all = np.concatenate([l for _, l in context]).astype(np.float64)
             assert np.allclose(kernel_attention.numpy() @ y_all, kernel[t], atol=2e-4)
     with pytest.raises(Exception, match="x_c must be"):  # torch.jit.Error carries the RuntimeError
-        module.encode_context(x_c[:, :, :FEATURE_DIM].contiguous(), y_c, mask)
+        module.encode_context(x_c[:, :, :FEATURE_DIM + 4].contiguous(), y_c, mask)
 
 
 def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
@@ -136,7 +136,7 @@ def test_cross_validated_blend_matches_refitting_without_each_fold(tmp_path):
     read with the other folds' clips as context: here the kernel read is refitted from scratch."""
     inner_path = _inner_policy(tmp_path)
     path = build_path_shape_policy(inner_path, tmp_path / "cv.pt", bandwidth=0.6, lam=0.01, folds=3,
-                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0)
+                                   commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0, min_fast_turns=0.0)
     module, inner = load_policy(path), load_policy(inner_path)
     rng = np.random.default_rng(7)
     context = _pieces(rng, [14, 9, 12, 11, 8])
@@ -272,6 +272,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
         "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN, "min_cchp_error": psp.DEFAULT_MIN_CCHP_ERROR,
+        "min_fast_turns": psp.DEFAULT_MIN_FAST_TURNS, "fast_turn_rad_s": psp.FAST_TURN_RAD_S,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
         "features": card["path_shape_read"]["features"]}
@@ -283,6 +284,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.kernel_anchors, wide.min_gain, wide.min_cchp_error) == (
         psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, 0.0, 0.5)
+    assert (wide.min_fast_turns, wide.fast_turn_rad_s) == (psp.DEFAULT_MIN_FAST_TURNS, psp.FAST_TURN_RAD_S) == (0.1, 2.0)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
     assert (wide.match_share, wide.match_velocity_weight, wide.match_tau) == (0.25, 50.0, 0.05) == (
@@ -405,7 +407,8 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
         y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
     untold = _pieces(rng, [14, 9, 12, 11, 8])  # labels of nothing in the features
     open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", bandwidth=0.6, lam=0.01,
-                                                    folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0))
+                                                    folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=0.0,
+                                                    min_fast_turns=0.0))
     choices = {}
     for name, context in (("told", told), ("untold", untold)):
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
@@ -416,7 +419,8 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
     assert choices["told"][1] > 0.5 and choices["untold"][1] < choices["told"][1] - 0.3, choices
     gate = 0.5 * (choices["told"][1] + choices["untold"][1])
     gated = load_policy(build_path_shape_policy(inner_path, tmp_path / "gated.pt", bandwidth=0.6, lam=0.01,
-                                                folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=gate))
+                                                folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=gate,
+                                                min_fast_turns=0.0))
     target = _pieces(rng, [10])[0][0]
     for name, context in (("told", told), ("untold", untold)):
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
@@ -434,24 +438,36 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
 def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_path):
     """`--min-cchp-error E`: A as fitted when the CCHP alone, cross-validated over the person's own clips,
     reads them with at least E of zero twist's squared error (`blend_choice`'s last entry, checked against
-    its definition above); `--min-blend B`: A as fitted when it is at least B. Else A = 0, and each step is
-    the CCHP's own step exactly: mean, std, read (its heads' mean) and attention."""
+    its definition above); `--min-blend B`: A as fitted when it is at least B; `--min-fast-turns F`: when
+    the palm turns faster than 2 rad/s in at least F of the context's moving steps. Else A = 0, and each
+    step is the CCHP's own step exactly: mean, std, read (its heads' mean) and attention."""
+    from rtcohand_drake.learning.path_shape_policy import FAST_TURN_RAD_S
+
     inner_path = _inner_policy(tmp_path)
     inner = load_policy(inner_path)
     rng = np.random.default_rng(11)
     context = _pieces(rng, [14, 9, 12, 11, 8])
     for x, y in context:  # labels that the path and shape tell, and the 36 motion features do not
         y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
+        x[:, 3:6] = rng.uniform(-2.0, 2.0, (len(x), 3))  # the palm's turn: about half the steps over 2 rad/s
+        x[::4, :FEATURE_DIM] = 0.0  # still steps, which the share leaves out
+    motion = np.concatenate([x[:, :FEATURE_DIM] for x, _ in context])
+    moving = np.abs(motion).sum(1) > 0
+    fast_turns = float(np.mean(np.linalg.norm(motion[moving, 3:6], axis=1) > FAST_TURN_RAD_S))
+    assert FAST_TURN_RAD_S == 2.0 and 0.2 < fast_turns < 0.8 and moving.mean() < 0.8
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
     settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0,
-                    min_blend=0.0)
+                    min_blend=0.0, min_fast_turns=0.0)
     open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", **settings))
     _, fitted, gain, cchp_error = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
     assert fitted > 0.05 and cchp_error > 0.1
+    assert float(open_file.fast_turn_share(x_c, mask)) == pytest.approx(fast_turns, abs=1e-9)
     target = _pieces(rng, [10])[0][0]
     gates = ((dict(min_cchp_error=cchp_error - 0.05), True), (dict(min_cchp_error=cchp_error + 0.05), False),
              (dict(min_cchp_error=cchp_error - 0.05, min_blend=fitted - 0.02), True),
-             (dict(min_cchp_error=cchp_error - 0.05, min_blend=fitted + 0.02), False))
+             (dict(min_cchp_error=cchp_error - 0.05, min_blend=fitted + 0.02), False),
+             (dict(min_cchp_error=cchp_error - 0.05, min_fast_turns=fast_turns - 0.02), True),
+             (dict(min_cchp_error=cchp_error - 0.05, min_fast_turns=fast_turns + 0.02), False))
     for i, (gate, kernel_used) in enumerate(gates):
         gated = load_policy(build_path_shape_policy(inner_path, tmp_path / f"gated{i}.pt", **{**settings, **gate}))
         keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
@@ -471,6 +487,43 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_cchp_error=-0.1)
     with pytest.raises(InputError, match="min_blend"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_blend=-0.5)
+    with pytest.raises(InputError, match="min_fast_turns"):
+        build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_fast_turns=1.5)
+
+
+def test_a_caller_of_the_36_features_alone_gets_the_cchp_exactly(tmp_path):
+    """A file that reads the path and shape is still a policy of the paper's 36 features (the exported
+    policy's contract): given a context and steps of those alone, it is read by the CCHP alone, exactly,
+    even where the person's wide context would give the kernel read a share; any other width is refused."""
+    inner_path = _inner_policy(tmp_path)
+    inner = load_policy(inner_path)
+    wide = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", bandwidth=0.6, lam=0.01, folds=3,
+                                               match=NO_MATCH, min_cchp_error=0.0, min_fast_turns=0.0))
+    rng = np.random.default_rng(11)
+    context = _pieces(rng, [14, 9, 12, 11, 8])
+    for x, y in context:  # labels that the path and shape tell
+        y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    assert float(wide.blend_choice(wide.encode_context(x_c, y_c, mask)[0])[0]) > 0.05  # wide: the kernel read
+    narrow = x_c[:, :, :FEATURE_DIM].contiguous()
+    keys, values, z_mu, z_sigma = wide.encode_context(narrow, y_c, mask)
+    assert float(wide.blend_choice(keys)[0]) == 0.0
+    inner_keys, inner_values, inner_mu, inner_sigma = inner.encode_context(narrow, y_c, mask)
+    assert torch.equal(wide._inner_keys(keys), inner_keys) and torch.equal(values, inner_values)
+    assert torch.equal(z_mu, inner_mu) and torch.equal(z_sigma, inner_sigma)
+    target = [x[:, :FEATURE_DIM].copy() for x, _ in _pieces(rng, [10])]
+    steps = 0
+    for (y, std, read, attention), (yi, std_i, read_i, attention_i) in _beside_the_cchp(
+            wide, inner, (narrow, y_c, mask), (keys, values, z_mu), target[0]):
+        assert (torch.equal(y, yi) and torch.equal(std, std_i) and torch.equal(read, read_i)
+                and torch.equal(attention, attention_i))
+        steps += 1
+    assert steps == 10
+    with pytest.raises(Exception, match="x_c must be"):
+        wide.encode_context(x_c[:, :, :40].contiguous(), y_c, mask)
+    h = torch.zeros(int(wide.hidden_size))
+    with pytest.raises(Exception, match="x_t must have"):
+        wide.step(torch.zeros(40), torch.zeros(6), h, h, keys, values, z_mu)
 
 
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):

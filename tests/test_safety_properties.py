@@ -13,6 +13,9 @@ the soak runs 10,000 with `RTCOHAND_PROPERTY_EXAMPLES=10000 pytest tests/test_sa
 RTCOHAND_PROPERTY_SHARD=N (a positive integer) draws the streams from hypothesis seed N instead of
 the fixed derandomized sequence, so a soak can run as shards in parallel processes (one per core),
 each with its own streams: for example shards 1 and 2 with 5,000 each.
+With a policy file that reads the hand's path and shape, RTCOHAND_PROPERTY_HAND=real (the default) gives
+the person a context whose palm turns fast, as a real hand's does, so that the file's kernel read is on;
+=simulated, a context that the file reads by the CCHP alone (the harness checks which).
 """
 
 import os
@@ -35,6 +38,7 @@ from rtcohand_drake.interfaces import GESTURE_FEATURES, GESTURE_STATUS, KEYPOINT
 
 EXAMPLES = int(os.environ.get("RTCOHAND_PROPERTY_EXAMPLES", "500"))
 SHARD = int(os.environ.get("RTCOHAND_PROPERTY_SHARD", "0"))
+HAND = os.environ.get("RTCOHAND_PROPERTY_HAND", "real")
 DURATION_S = 3.0
 RATE_HZ = 10.0
 KINDS = ("gesture", "nan", "inf", "huge", "frozen", "dropped", "jump", "flip", "silence")
@@ -180,14 +184,27 @@ def _harness(scenario, model):
     from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM
     from rtcohand_drake.learning.policy_file import load_policy
 
-    wide = int(load_policy(model).feature_dim) > 36  # a file that reads the hand's path and shape
+    import torch
+
+    from rtcohand_drake.data.sampling import pack_context
+
+    module = load_policy(model)
+    wide = int(module.feature_dim) > 36  # a file that reads the hand's path and shape
     source = StreamGestureSource(keypoints=wide)
     operator = SettableOperator()
     context_rng = np.random.default_rng(0)
     pieces = [(context_rng.normal(0, 0.2, (40, 36)), context_rng.normal(0, 0.05, (40, 6))) for _ in range(3)]
     if wide:
+        if HAND not in ("real", "simulated"):
+            pytest.fail(f"RTCOHAND_PROPERTY_HAND={HAND!r}: real or simulated")
+        if HAND == "real":  # the palm turns fast, as a real hand's does
+            for x, _ in pieces:
+                x[:, 3:6] = context_rng.normal(0, 2.0, (40, 3))
         shape_rng = np.random.default_rng(1)
         pieces = [(np.hstack([x, shape_rng.normal(0, 0.05, (40, PATH_SHAPE_DIM))]), y) for x, y in pieces]
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
+        kernel_share = float(module.blend_choice(module.encode_context(x_c, y_c, mask)[0])[0])
+        assert (kernel_share > 0.0) == (HAND == "real"), (HAND, kernel_share)  # the read put through the properties
     policy = CchpPolicy.from_scenario(model, pieces, scenario.policy)
     run = build_run_diagram(scenario, source=source, policy=policy, operator=operator, gesture_source="stream")
     return scenario, run, source, operator

@@ -2,7 +2,7 @@
 
     python -m rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt
         [--blend A] [--bandwidth S] [--lambda L] [--folds F] [--rows R] [--anchors N] [--min-gain G]
-        [--min-cchp-error E] [--min-blend B]
+        [--min-cchp-error E] [--min-blend B] [--min-fast-turns F]
         [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--hold HIGH STEPS_ON LOW STEPS_OFF SHARE]
         [--encoder ENCODER.pt]
 
@@ -135,6 +135,16 @@ DEFAULT_MIN_CCHP_ERROR = 0.5
 # development people whom the CCHP reads with a share of 0.5 or more, 0.28 or less) gave one held-out simulated
 # person a kernel read that read them worse, so it was not the one default either (docs/policy.md).
 DEFAULT_MIN_BLEND = 0.0
+# The kernel read is used only for a context whose palm turns faster than FAST_TURN_RAD_S in at least
+# `--min-fast-turns` of its moving steps (steps with any of the 36 velocities nonzero): a hand that moves
+# unlike the simulated hands the CCHP learned from. Chosen on development people (docs/policy.md, "One
+# file for every hand: the kernel read for hands unlike the simulated ones"): simulated populations 0-10,
+# four style families, one of people who make every motion the direct way and one of people who stroke,
+# at most 0.3 % of such steps; one tracked as recorded hands were (`data.generate --recorded-tracking`) at
+# most 3.1 %; the 10 recorded development people, 28-48 % on every map; the real camera footage, 21 %.
+# 0.1 lies between (about the geometric mean of 3.1 % and 27.7 %).
+FAST_TURN_RAD_S = 2.0
+DEFAULT_MIN_FAST_TURNS = 0.1
 # The command hold a file may ask the policy box for (learning.command_hold): [high, steps_on, low,
 # steps_off, share]; share 0: none. HOLD_CHOSEN was chosen on the recorded development people's held-out
 # gestures back to back through the run command; reported once it read every map better but drifted more
@@ -154,7 +164,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
                  match: Tuple[float, float, float] = (0.0, MATCH_VELOCITY_WEIGHT, MATCH_TAU),
                  anchors: int = DEFAULT_ANCHORS, min_gain: float = 0.0,
                  hold: Tuple[float, float, float, float, float] = NO_HOLD, min_cchp_error: float = 0.0,
-                 min_blend: float = 0.0):
+                 min_blend: float = 0.0, min_fast_turns: float = 0.0):
         super().__init__()
         if int(inner.feature_dim) != FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features and have step_read")
@@ -183,6 +193,12 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         self.min_cchp_error = float(min_cchp_error)
         # ... and only if the fitted A is at least this (0: any A; above 1: nobody).
         self.min_blend = float(min_blend)
+        if not 0.0 <= min_fast_turns <= 1.0:
+            raise InputError(f"min_fast_turns must be in [0, 1]; got {min_fast_turns}")
+        # ... and only if the context's palm turns faster than fast_turn_rad_s in at least this share of its
+        # moving steps (0: any context).
+        self.min_fast_turns = float(min_fast_turns)
+        self.fast_turn_rad_s = FAST_TURN_RAD_S
         self.inner = inner
         self.kernel_anchors = int(anchors)  # the context steps the kernel read is fitted on, at most
         self.inner_hidden = int(inner.hidden_size)
@@ -275,10 +291,28 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         return torch.cat([p[:, :63], -p[:, 63:126].reshape(n, 21, 3).mean(1) / 0.4], 1)
 
     @torch.jit.export
+    def fast_turn_share(self, x_c: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """The share of the context's moving steps (any of the 36 velocities nonzero) in which the palm's
+        frame turns faster than `fast_turn_rad_s` (0 for a context that never moves)."""
+        x = torch.nan_to_num(x_c[:, :, :self.motion_feature_dim][mask.to(torch.bool)], 0.0, 0.0, 0.0)
+        moving = x.abs().sum(1) > 0
+        if int(moving.sum()) == 0:
+            return torch.zeros((), dtype=torch.float64)
+        turn = (x[moving][:, 3:6].to(torch.float64) ** 2).sum(1).sqrt()  # the palm (part 0): its angular velocity
+        return (turn > self.fast_turn_rad_s).to(torch.float64).mean()
+
+    @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
                        ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        if x_c.dim() != 3 or x_c.size(2) != self.feature_dim:
-            raise RuntimeError(f"encode_context: x_c must be (B, T, {self.feature_dim}), got {x_c.shape}")
+        """The context of the paper's 36 features alone (a caller that knows nothing of the path and shape)
+        is read by the CCHP alone, exactly: A = 0, and `step` takes 36 features then too."""
+        if x_c.dim() != 3 or x_c.size(2) not in (self.motion_feature_dim, self.feature_dim):
+            raise RuntimeError(f"encode_context: x_c must be (B, T, {self.feature_dim}) or (B, T, "
+                               f"{self.motion_feature_dim}), got {x_c.shape}")
+        motion_only = x_c.size(2) == self.motion_feature_dim
+        if motion_only:
+            x_c = torch.cat([x_c, torch.zeros(x_c.size(0), x_c.size(1), self.feature_dim - self.motion_feature_dim,
+                                              dtype=x_c.dtype)], 2)
         m = mask.to(torch.bool)
         if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
             raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
@@ -311,11 +345,14 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         fitted = torch.full((1,), self.kernel_blend, dtype=torch.float64)
         gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
         cchp_error = torch.full((1,), -1.0, dtype=torch.float64)
-        if self.blend_folds > 0 and x_c.size(0) > 1:
+        if motion_only:
+            blend = torch.zeros(1, dtype=torch.float64)
+        elif self.blend_folds > 0 and x_c.size(0) > 1:
             fitted_a, gain_a, cchp_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
             fitted, gain, cchp_error = fitted_a.view(1), gain_a.view(1), cchp_a.view(1)
             used = (float(gain_a) >= self.min_gain and float(cchp_a) >= self.min_cchp_error
-                    and float(fitted_a) >= self.min_blend)
+                    and float(fitted_a) >= self.min_blend
+                    and (self.min_fast_turns <= 0.0 or float(self.fast_turn_share(x_c, m)) >= self.min_fast_turns))
             blend = fitted if used else torch.zeros(1, dtype=torch.float64)
         parts = [mean, spread, width.view(1), blend]
         if self.commit_share > 0:
@@ -490,8 +527,11 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
               values: torch.Tensor, z: torch.Tensor
               ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
                          torch.Tensor]:
+        if x_t.numel() == self.motion_feature_dim:  # the paper's 36 alone: no path and shape
+            x_t = torch.cat([x_t.view(-1), torch.zeros(self.feature_dim - self.motion_feature_dim, dtype=x_t.dtype)])
         if x_t.numel() != self.feature_dim:
-            raise RuntimeError(f"step: x_t must have {self.feature_dim} features, got {x_t.numel()}")
+            raise RuntimeError(f"step: x_t must have {self.feature_dim} (or {self.motion_feature_dim}) features, "
+                               f"got {x_t.numel()}")
         k = keys.size(0)
         a = self._anchors(k)
         x_t = x_t.view(-1)
@@ -582,7 +622,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                             anchors: int = DEFAULT_ANCHORS, min_gain: float = DEFAULT_MIN_GAIN,
                             hold: Tuple[float, float, float, float, float] = DEFAULT_HOLD,
                             min_cchp_error: float = DEFAULT_MIN_CCHP_ERROR,
-                            min_blend: float = DEFAULT_MIN_BLEND) -> pathlib.Path:
+                            min_blend: float = DEFAULT_MIN_BLEND,
+                            min_fast_turns: float = DEFAULT_MIN_FAST_TURNS) -> pathlib.Path:
     """Writes the extended policy file, its model card extended with the read's settings (and, with
     `encoder`, the kernel reading the embedding of that `learning.hand_encoder` file)."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
@@ -597,12 +638,13 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
         scripted = torch.jit.script(PathShapeKernelPolicy(inner, blend, bandwidth, lam, folds, rows,
                                                           encoder_module, tuple(commit), tuple(match),
                                                           anchors, min_gain, tuple(hold), min_cchp_error,
-                                                          min_blend).eval())
+                                                          min_blend, min_fast_turns).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
         "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
         "min_cchp_error": min_cchp_error,
         **({"min_blend": min_blend} if min_blend > 0 else {}),
+        **({"min_fast_turns": min_fast_turns, "fast_turn_rad_s": FAST_TURN_RAD_S} if min_fast_turns > 0 else {}),
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM,
         **({"commit": list(commit)} if commit[0] > 0 else {}),
         **({"match": list(match), "match_max_steps": MATCH_MAX_STEPS} if match[0] > 0 else {}),
@@ -644,6 +686,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-blend", type=float, default=DEFAULT_MIN_BLEND,
                    help="use a person's kernel read only if the blend fitted on their own clips gives it at least "
                         "this share A (0: any A; above 1: the CCHP alone for everyone)")
+    p.add_argument("--min-fast-turns", type=float, default=DEFAULT_MIN_FAST_TURNS,
+                   help=f"use a person's kernel read only if their palm turns faster than {FAST_TURN_RAD_S:g} rad/s in "
+                        "at least this share of their clips' moving steps (0: any context)")
     p.add_argument("--hold", type=float, nargs=5, metavar=("HIGH", "STEPS_ON", "LOW", "STEPS_OFF", "SHARE"),
                    default=list(DEFAULT_HOLD),
                    help="ask the policy box to hold SHARE of a command at its full size once the output has pointed "
@@ -658,7 +703,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_path_shape_policy(args.policy, args.out, args.blend, args.bandwidth, args.lam, args.folds, args.rows,
                                   args.encoder, tuple(args.commit), tuple(args.match), args.anchors,
-                                  args.min_gain, tuple(args.hold), args.min_cchp_error, args.min_blend)
+                                  args.min_gain, tuple(args.hold), args.min_cchp_error, args.min_blend,
+                                  args.min_fast_turns)
     print(f"wrote {out}")
     return 0
 

@@ -79,14 +79,17 @@ class Policy:
 
     # Policy update rate (Hz); the paper's deployment runs at 10 Hz.
     rate_hz: float = 10.0
-    # Exported TorchScript policy: a path, or a file name inside models/.
-    model: str = "cchp_default.pt"
-    # The policy file for a real hand's skeleton, used in place of `model` when the run's gesture
-    # source plays a real hand (the camera; replay and recorded people of a file that is not a
-    # generated population), and by the recorder's and context_reading's check of such a person's
-    # clips (rtcohand_drake.systems.gestures.registry.reads_real_hands). Empty: `model` for every
-    # source. `--model` overrides both.
-    real_hand_model: str = "cchp_path_shape.pt"
+    # Exported TorchScript policy: a path, or a file name inside models/. The shipped file reads every
+    # source: the CCHP (models/cchp_default.pt) and, for a person whom the CCHP does not read and whose
+    # hand moves unlike the simulated ones, a kernel read of the hand's path and shape fitted to their
+    # own clips (rtcohand_drake.learning.path_shape_policy; docs/policy.md).
+    model: str = "cchp_path_shape.pt"
+    # A policy file for a real hand's skeleton, used in place of `model` when the run's gesture source
+    # plays a real hand (the camera; replay and recorded people of a file that is not a generated
+    # population), and by the recorder's and context_reading's check of such a person's clips
+    # (rtcohand_drake.systems.gestures.registry.reads_real_hands). Empty (the default): `model` for
+    # every source. `--model` overrides both.
+    real_hand_model: str = ""
     # The twist output is r + w (mean - r), r the context read (attention . the user's own
     # labelled twists): 1 = the module's mean (the paper's CCHP), 0 = the read alone
     # (rtcohand_drake.systems.policy).
