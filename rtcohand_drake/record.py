@@ -378,8 +378,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-meshcat", action="store_true", help="no cue in Meshcat (headless)")
     p.add_argument("--no-check", action="store_true", help="skip the reading check at the end")
     p.add_argument("--model", type=Path, default=None,
-                   help="the policy file the reading check reads the clips with (default: the scenario's file "
-                        "for real hands, policy.real_hand_model)")
+                   help="the policy file the reading check reads the clips with (default: the scenario's "
+                        "policy.model, or its policy.real_hand_model where one is named)")
     p.add_argument("--seed", type=int, default=0, help="seeds the simulated person's responses")
     p.add_argument("--labels", choices=("cue", "aruco"), default="cue",
                    help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")

@@ -58,4 +58,6 @@ def test_context_reading_checks_every_persons_clips_with_the_one_default_file(fi
             user = sorted(f["users"])[0]
         assert run_cli(context_reading.main, ["--context-file", str(path), "--context-user", user, "--folds", "2",
                                               "--no-progress"]) == 0
-        assert "policy cchp_path_shape.pt" in capsys.readouterr().out
+        printed = capsys.readouterr().out
+        assert "policy cchp_path_shape.pt" in printed
+        assert "read: the CCHP alone: the CCHP alone reads these clips at " in printed  # the palm turns slowly

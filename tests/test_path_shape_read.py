@@ -526,6 +526,30 @@ def test_a_caller_of_the_36_features_alone_gets_the_cchp_exactly(tmp_path):
         wide.step(torch.zeros(40), torch.zeros(6), h, h, keys, values, z_mu)
 
 
+def test_the_reading_check_says_which_read_a_person_gets_and_why(tmp_path):
+    """`context_reading.read_choice`: the kernel read and its blend where both gates let it in; the CCHP
+    alone otherwise, with the figures that decided, and how to get the kernel read for a real hand
+    tracked so smoothly that its palm never turns fast."""
+    from rtcohand_drake.analysis.context_reading import LabelledClip, read_choice
+
+    inner_path = _inner_policy(tmp_path)
+    rng = np.random.default_rng(11)
+    context = _pieces(rng, [14, 9, 12, 11, 8])
+    for x, y in context:  # labels that the path and shape tell; the palm turns fast in about half the steps
+        y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
+        x[:, 3:6] = rng.uniform(-2.0, 2.0, (len(x), 3))
+    clips = [LabelledClip(f"c{i}", x, y, (0,)) for i, (x, y) in enumerate(context)]
+    settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0)
+    opened = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", **settings))
+    line = read_choice(opened, clips)
+    assert line.startswith("read: the CCHP and the kernel read of the hand's path and shape, blended ")
+    assert "faster than 2 rad/s in " in line and "(from 10%)" in line and "--min-fast-turns 0" not in line
+    smooth = load_policy(build_path_shape_policy(inner_path, tmp_path / "smooth.pt", **settings, min_fast_turns=0.9))
+    line = read_choice(smooth, clips)
+    assert line.startswith("read: the CCHP alone: ") and "(from 90%)" in line and "--min-fast-turns 0" in line
+    assert read_choice(load_policy(inner_path), clips) is None  # a CCHP file: nothing to choose
+
+
 def test_context_reading_checks_a_persons_clips_with_the_path_shape_file(tmp_path, person_file, capsys):
     """The reading check gives the wide file the path and shape, the ridge and nearest neighbours the 36
     velocities, and adds the kernel read of the path and shape as a third reference."""

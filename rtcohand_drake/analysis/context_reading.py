@@ -305,6 +305,31 @@ def recording_style(path: Path) -> str:
     return protocol.get("style", "hold")
 
 
+def read_choice(module, clips: Sequence[LabelledClip]) -> str | None:
+    """Which read a policy file that reads the hand's path and shape (`learning.path_shape_policy`) gives
+    the person from all of their clips as context, and why, in one line; None for any other file."""
+    if not hasattr(module, "blend_choice") or not hasattr(module, "fast_turn_share"):
+        return None
+    import torch
+
+    from rtcohand_drake.data.sampling import pack_context
+
+    x, y, m = (torch.from_numpy(a) for a in pack_context([(c.features, c.labels) for c in clips]))
+    used, _, _, cchp_error = (float(v) for v in module.blend_choice(module.encode_context(x, y, m)[0]))
+    fast = float(module.fast_turn_share(x, m))
+    why = (f"the CCHP alone reads these clips at {cchp_error:.2f} of zero twist's squared error (the kernel read "
+           f"from {float(module.min_cchp_error):g}), and the palm turns faster than {float(module.fast_turn_rad_s):g} "
+           f"rad/s in {fast:.0%} of their moving steps (from {float(module.min_fast_turns):.0%})")
+    if used > 0:
+        return f"read: the CCHP and the kernel read of the hand's path and shape, blended {used:.2f}: {why}"
+    advice = ""
+    if cchp_error >= float(module.min_cchp_error) and fast < float(module.min_fast_turns):
+        advice = ("; a real hand tracked this smoothly: a file built with `python -m "
+                  "rtcohand_drake.learning.path_shape_policy --policy models/cchp_default.pt --out FILE.pt "
+                  "--min-fast-turns 0` gives it the kernel read (then --model FILE.pt)")
+    return f"read: the CCHP alone: {why}{advice}"
+
+
 def clips_from_file(paths, user: str | None, rate_hz: float,
                     path_shape: bool = False) -> tuple[list[LabelledClip], str]:
     """A user's labelled clips from a dataset file, or from several together (`--context-file A.h5
@@ -355,8 +380,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", default="inspection",
                    help="scenario whose policy settings (model, correction_weight) are checked")
     p.add_argument("--model", type=Path, default=None,
-                   help="exported policy (default: the scenario's; for a real person's clips its file for real "
-                        "hands, policy.real_hand_model)")
+                   help="exported policy (default: the scenario's policy.model; for a real person's clips its "
+                        "policy.real_hand_model where one is named)")
     p.add_argument("--correction-weight", type=float, default=None,
                    help="w of the policy's output r + w (mean - r) (default: the scenario's)")
     p.add_argument("--folds", type=int, default=6,
@@ -396,8 +421,8 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
     weight = scenario.policy.correction_weight if args.correction_weight is None else args.correction_weight
     if not 0.0 <= weight <= 1.0:
         raise InputError(f"command line: --correction-weight must be in [0, 1], got {weight}")
-    # Without --model: the scenario's file for the clips' hands (a real person's clips: the file for
-    # real hands; generated people's: policy.model).
+    # Without --model: the scenario's policy.model (for a real person's clips, policy.real_hand_model
+    # where one is named).
     real = args.context_file is not None and not all(is_generated(p) for p in as_paths(args.context_file))
     model = args.model or policy_file_path(policy_model_name(scenario.policy, real))
     module = load_policy(model)
@@ -467,6 +492,9 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
     print(f"held-out squared error over the played clips: {share(means):.3f} of commanding zero twist "
           f"(fitted to the person's context: " + ", ".join(f"{r} {share(m):.3f}" for r, m in references.items())
           + ")")
+    choice = read_choice(module, clips) if wide else None
+    if choice:
+        print(choice)
     weak = [name for name, _, gain, _ in rows if gain < READS]
     print("read below half their size: " + (", ".join(weak) if weak else "none"))
     crossed = confusions(clips, means)

@@ -3,7 +3,7 @@
     python -m rtcohand_drake.learning.hand_encoder --data PEOPLE.h5 [MORE.h5 ...] --out encoder.pt
         [--iterations 1200] [--seed 0] [--max-minutes M]
 
-The kernel read of the policy file for real hands (`learning.path_shape_policy`) measures how alike
+The kernel read of the shipped policy file (`learning.path_shape_policy`) measures how alike
 two moments of a hand are by the distance between their raw path-and-shape features
 (`hand_features.PathShapeStream`, PATH_SHAPE_DIM numbers). It knows nothing of hands beyond one
 person's own clips. This module learns, from the labelled clips of many people, a map of those

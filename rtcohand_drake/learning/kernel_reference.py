@@ -5,7 +5,7 @@ the 36 velocities: `to_policy_clip(path_shape=True)`), it reads each step's twis
 regression over the path-and-shape columns: standardised by the context's steps, a Gaussian kernel
 whose bandwidth is `bandwidth` x the median distance between the context's steps, `lam` on the
 diagonal, the labels' context mean the read with no evidence. One linear solve, no training. It is
-the read the policy file for real hands blends with the CCHP (`learning.path_shape_policy`), alone;
+the read the shipped policy file blends with the CCHP (`learning.path_shape_policy`), alone;
 its settings were chosen on recorded development people (docs/real_people.md, section 4).
 """
 

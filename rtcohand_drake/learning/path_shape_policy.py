@@ -6,8 +6,8 @@
         [--commit SHARE LOW HIGH] [--match SHARE W TAU] [--hold HIGH STEPS_ON LOW STEPS_OFF SHARE]
         [--encoder ENCODER.pt]
 
-The policy file for real hands, `models/cchp_path_shape.pt`, is this file built over the default
-CCHP, `models/cchp_default.pt`, with the defaults below.
+The shipped policy file, `models/cchp_path_shape.pt` (the scenario's `policy.model`, for every
+source), is this file built over the shipped CCHP, `models/cchp_default.pt`, with the defaults below.
 
 The 36 hand-part velocities carry the hand's motion, not the posture it is made
 in nor the path it took: a one-finger gesture and the same gesture of the whole
@@ -141,7 +141,7 @@ DEFAULT_MIN_BLEND = 0.0
 # file for every hand: the kernel read for hands unlike the simulated ones"): simulated populations 0-10,
 # four style families, one of people who make every motion the direct way and one of people who stroke,
 # at most 0.3 % of such steps; one tracked as recorded hands were (`data.generate --recorded-tracking`) at
-# most 3.1 %; the 10 recorded development people, 28-48 % on every map; the real camera footage, 21 %.
+# most 3.1 %; the 10 recorded development people, 28-51 % on every map; the real camera footage, 21 %.
 # 0.1 lies between (about the geometric mean of 3.1 % and 27.7 %).
 FAST_TURN_RAD_S = 2.0
 DEFAULT_MIN_FAST_TURNS = 0.1
