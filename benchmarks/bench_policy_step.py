@@ -48,8 +48,11 @@ def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator
     f = int(policy.feature_dim)  # 36, or 351 for a file that reads the hand's path and shape
     x_c = torch.from_numpy(rng.normal(size=(b, piece, f)).astype(np.float32) * 0.2)
     # Labels that the last 6 features tell (the hand's path and shape, for a file that reads them) and no
-    # file learned: a file that blends in a read of the person's own clips then uses it (A > 0), as for a
-    # recorded person, and the time is that of its full step.
+    # file learned, and a palm that turns fast (features 3-5, about 2 rad/s a step, as a real hand's does):
+    # a file that blends in a read of the person's own clips then uses it (A > 0), as for a recorded
+    # person, and the time is that of its full step.
+    if f > 36:
+        x_c[:, :, 3:6] *= 10.0
     y_c = 0.1 * torch.tanh(5.0 * x_c[:, :, -6:])
     mask = torch.zeros(b, piece, dtype=torch.bool)
     mask.view(-1)[:k] = True
