@@ -108,7 +108,7 @@ def main(argv=None) -> int:
         # The checkout by its commit: the results file is committed, and its folder means nothing elsewhere.
         result[name] = {"checkout": checkout_commit(path), "fresh": f, "warm_after_first": w, "warm_first": rows[name]["warm"][0],
                         "rows": rows[name]}
-        print(f"| {name} ({path.name}) | {f['total_s']:.1f} s | {f['sim_wall_s']:.1f} s ({f['sim_s']:.1f} s simulated) "
+        print(f"| {name} ({path.name}) | {f['total_s']:.1f} s | {f['sim_wall_s']:.2f} s ({f['sim_s']:.1f} s simulated) "
               f"| {f['startup_s']:.1f} s | {f['realtime_factor']:.1f}x | {w['total_s']:.1f} s | {w['startup_s']:.1f} s |")
     if "other" in result:
         a, b = result["this"], result["other"]

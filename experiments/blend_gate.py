@@ -47,7 +47,7 @@ def main(argv=None) -> int:
     for i, (e_n, e_w) in enumerate(zip(narrow_eps, wide_eps)):
         e_f = e_w if int(wide.feature_dim) > FEATURE_DIM else e_n  # the episode as FILE reads it
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(e_f.context))
-        keys = wide.encode_context(x_c, y_c, mask)[0]
+        keys = getattr(wide, "encode_context_fitted", wide.encode_context)(x_c, y_c, mask)[0]
         used, fitted, gain = (float(v) for v in wide.blend_choice(keys)[:3])
         rows.append({"episode": i, "a_used": used, "a_fitted": fitted, "gain": gain,
                      "zero": float(np.mean(np.asarray(e_n.target.labels, np.float64) ** 2)),

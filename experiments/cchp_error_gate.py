@@ -50,7 +50,8 @@ def main(argv=None) -> int:
 
     def choice(pieces):
         x, y, m = (torch.from_numpy(a) for a in pack_context(pieces))
-        return [float(v) for v in module.blend_choice(module.encode_context(x, y, m)[0])]
+        encode = getattr(module, "encode_context_fitted", module.encode_context)  # fitted whatever the gates
+        return [float(v) for v in module.blend_choice(encode(x, y, m)[0])]
 
     rows = []
     if args.people:

@@ -34,7 +34,8 @@ def variances(module, context, features, keypoints):
 
     x_c, y_c, mask = pack_context(context)
     with torch.no_grad():
-        keys, values, z, _ = module.encode_context(torch.from_numpy(x_c), torch.from_numpy(y_c),
+        keys, values, z, _ = getattr(module, "encode_context_fitted", module.encode_context)(
+            torch.from_numpy(x_c), torch.from_numpy(y_c),
                                                    torch.from_numpy(mask))
         stream = guard_stream(fit_rest_release(context), np.nan_to_num(features), keypoints, 10.0)
         extras = module._extras(keys)

@@ -289,7 +289,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     completion = f"{log.completion_time:.1f} s" if log.completed else "not completed"
     policy = f", policy {Path(log.model).name}" if log.model else ""  # which file read the hand
     print(f"scenario {scenario.name}, gesture source {run.gesture_source}{policy}: {sim_time:.1f} s simulated "
-          f"in {wall:.1f} s ({sim_time / max(wall, 1e-9):.1f}x real time)")
+          f"in {wall:.2f} s ({sim_time / max(wall, 1e-9):.1f}x real time)")
     print(f"faces inspected: {log.faces_inspected}/6, completion: {completion}")
     print(f"peak workpiece speed: {v_peak:.3f} m/s, {w_peak:.3f} rad/s")
     near = "never near the mold" if not np.isfinite(clearance) else (

@@ -435,19 +435,17 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_gain=1.0)
 
 
-def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_path):
-    """`--min-cchp-error E`: A as fitted when the CCHP alone, cross-validated over the person's own clips,
-    reads them with at least E of zero twist's squared error (`blend_choice`'s last entry, checked against
-    its definition above); `--min-blend B`: A as fitted when it is at least B; `--min-fast-turns F`: when
-    the palm turns faster than 2 rad/s in at least F of the context's moving steps. Else A = 0, and each
-    step is the CCHP's own step exactly: mean, std, read (its heads' mean) and attention."""
+GATE_TEST_SETTINGS = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0,
+                          min_blend=0.0, min_fast_turns=0.0)
+
+
+def _fast_turning_context(rng):
+    """Five clips whose labels the path and shape tell and the 36 motion features do not, with the palm
+    turning faster than 2 rad/s in about half of the moving steps; and that share."""
     from rtcohand_drake.learning.path_shape_policy import FAST_TURN_RAD_S
 
-    inner_path = _inner_policy(tmp_path)
-    inner = load_policy(inner_path)
-    rng = np.random.default_rng(11)
     context = _pieces(rng, [14, 9, 12, 11, 8])
-    for x, y in context:  # labels that the path and shape tell, and the 36 motion features do not
+    for x, y in context:
         y[:] = np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.1
         x[:, 3:6] = rng.uniform(-2.0, 2.0, (len(x), 3))  # the palm's turn: about half the steps over 2 rad/s
         x[::4, :FEATURE_DIM] = 0.0  # still steps, which the share leaves out
@@ -455,9 +453,21 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
     moving = np.abs(motion).sum(1) > 0
     fast_turns = float(np.mean(np.linalg.norm(motion[moving, 3:6], axis=1) > FAST_TURN_RAD_S))
     assert FAST_TURN_RAD_S == 2.0 and 0.2 < fast_turns < 0.8 and moving.mean() < 0.8
+    return context, fast_turns
+
+
+def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_path):
+    """`--min-cchp-error E`: A as fitted when the CCHP alone, cross-validated over the person's own clips,
+    reads them with at least E of zero twist's squared error (`blend_choice`'s last entry, checked against
+    its definition above); `--min-blend B`: A as fitted when it is at least B; `--min-fast-turns F`: when
+    the palm turns faster than 2 rad/s in at least F of the context's moving steps. Else A = 0, and each
+    step is the CCHP's own step exactly: mean, std, read (its heads' mean) and attention."""
+    inner_path = _inner_policy(tmp_path)
+    inner = load_policy(inner_path)
+    rng = np.random.default_rng(11)
+    context, fast_turns = _fast_turning_context(rng)
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
-    settings = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0,
-                    min_blend=0.0, min_fast_turns=0.0)
+    settings = GATE_TEST_SETTINGS
     open_file = load_policy(build_path_shape_policy(inner_path, tmp_path / "open.pt", **settings))
     _, fitted, gain, cchp_error = (float(v) for v in open_file.blend_choice(open_file.encode_context(x_c, y_c, mask)[0]))
     assert fitted > 0.05 and cchp_error > 0.1
@@ -472,8 +482,15 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
         gated = load_policy(build_path_shape_policy(inner_path, tmp_path / f"gated{i}.pt", **{**settings, **gate}))
         keys, values, z_mu, _ = gated.encode_context(x_c, y_c, mask)
         used, *rest = (float(v) for v in gated.blend_choice(keys))
-        assert rest == pytest.approx([fitted, gain, cchp_error], abs=1e-6)
-        assert used == (fitted if kernel_used else 0.0)
+        fitted_keys = gated.encode_context_fitted(x_c, y_c, mask)[0]
+        used_fitted, *rest_fitted = (float(v) for v in gated.blend_choice(fitted_keys))
+        assert rest_fitted == pytest.approx([fitted, gain, cchp_error], abs=1e-6) and used_fitted == used
+        assert used == (fitted if kernel_used else 0.0) and keys.shape == fitted_keys.shape
+        if "min_fast_turns" in gate and not kernel_used:
+            # Turned away by the fast-turn gate: the kernel read is neither fitted nor cross-validated.
+            assert rest == [pytest.approx(float(gated.kernel_blend)), -1.0, -1.0]
+        else:
+            assert torch.equal(keys, fitted_keys)
         differs = False
         for (y, std, read, attention), (yi, std_i, read_i, attention_i) in _beside_the_cchp(
                 gated, inner, (x_c, y_c, mask), (keys, values, z_mu), target):
@@ -489,6 +506,46 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_blend=-0.5)
     with pytest.raises(InputError, match="min_fast_turns"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_fast_turns=1.5)
+
+
+def test_the_box_of_a_person_the_file_reads_with_the_cchp_alone_is_the_cchp_box_and_leaves_the_skeleton(tmp_path):
+    """A person the fast-turn gate turns away: the policy box with the wide file gives, period by period,
+    the twist of the box with its CCHP file alone, and never reads its keypoints port (left unconnected
+    here, which Drake refuses to evaluate); a person the gate lets through gets the kernel read, from the
+    skeleton."""
+    from rtcohand_drake.interfaces import GESTURE_FEATURES, POLICY_MEAN
+    from rtcohand_drake.systems.policy import CchpPolicy
+
+    inner_path = _inner_policy(tmp_path)
+    rng = np.random.default_rng(11)
+    context, fast_turns = _fast_turning_context(rng)
+    features = _pieces(rng, [12])[0][0][:, :FEATURE_DIM]
+
+    def twists(model, pieces, keypoints):
+        box = CchpPolicy(model, pieces, 10.0, seed=2, rest_release=False, command_hold=False)
+        simulator = Simulator(box)
+        ctx = simulator.get_mutable_context()
+        out = []
+        for k, x in enumerate(features):  # each period's features, then the box's update at k / 10 s
+            box.GetInputPort(GESTURE_FEATURES).FixValue(ctx, x)
+            if keypoints is not None:
+                box.GetInputPort(KEYPOINTS).FixValue(ctx, keypoints)
+            simulator.AdvanceTo(k * 0.1 + 0.05)
+            out.append(box.GetOutputPort(POLICY_MEAN).Eval(ctx).copy())
+        return np.array(out), box
+
+    narrow = [(x[:, :FEATURE_DIM], y) for x, y in context]
+    alone, _ = twists(inner_path, narrow, None)
+    turned_away = build_path_shape_policy(inner_path, tmp_path / "away.pt",
+                                          **{**GATE_TEST_SETTINGS, "min_fast_turns": fast_turns + 0.02})
+    wide, box = twists(turned_away, context, None)
+    assert box.HasInputPort(KEYPOINTS) and np.abs(alone).max() > 1e-3
+    np.testing.assert_array_equal(wide, alone)
+    let_through = build_path_shape_policy(inner_path, tmp_path / "through.pt", **GATE_TEST_SETTINGS)
+    with pytest.raises(RuntimeError, match="keypoints"):
+        twists(let_through, context, None)
+    skeleton = rng.normal(0.0, 0.05, 63)
+    assert not np.allclose(twists(let_through, context, skeleton)[0], alone, atol=1e-4)
 
 
 def test_a_caller_of_the_36_features_alone_gets_the_cchp_exactly(tmp_path):

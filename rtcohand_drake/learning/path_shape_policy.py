@@ -305,7 +305,22 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
                        ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """The context of the paper's 36 features alone (a caller that knows nothing of the path and shape)
-        is read by the CCHP alone, exactly: A = 0, and `step` takes 36 features then too."""
+        is read by the CCHP alone, exactly: A = 0, and `step` takes 36 features then too. So is a context
+        whose palm turns fast too seldom (`min_fast_turns`): for either, the kernel read is neither fitted
+        nor cross-validated (its part of the keys is zeros, `blend_choice` gives A = 0 and -1 for what
+        was not measured), and encoding costs about what the CCHP's own does."""
+        return self._encode(x_c, y_c, mask, True)
+
+    @torch.jit.export
+    def encode_context_fitted(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
+                              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """`encode_context` with the kernel read fitted and cross-validated whatever the fast-turn gate
+        says (A used still obeys it; the same read): for the reading check and measurements of the
+        kernel read itself."""
+        return self._encode(x_c, y_c, mask, False)
+
+    def _encode(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor, may_skip: bool
+                ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         if x_c.dim() != 3 or x_c.size(2) not in (self.motion_feature_dim, self.feature_dim):
             raise RuntimeError(f"encode_context: x_c must be (B, T, {self.feature_dim}) or (B, T, "
                                f"{self.motion_feature_dim}), got {x_c.shape}")
@@ -317,8 +332,12 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         if y_c.dim() != 3 or y_c.size(2) != 6 or m.shape != x_c.shape[:2] or y_c.shape[:2] != x_c.shape[:2]:
             raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
         keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c[:, :, :self.motion_feature_dim].contiguous(), y_c, m)
+        k = int(m.sum())
+        cross_validated = not motion_only and self.blend_folds > 0 and x_c.size(0) > 1
+        if may_skip and (motion_only or (cross_validated and self.min_fast_turns > 0.0
+                                         and float(self.fast_turn_share(x_c, m)) < self.min_fast_turns)):
+            return self._cchp_alone_keys(keys_in, k), values, z_mu, z_sigma
         s_all = self.encoder(torch.nan_to_num(x_c[:, :, self.motion_feature_dim:][m], 0.0, 0.0, 0.0)).to(torch.float64)
-        k = s_all.size(0)
         mean = s_all.mean(0)
         spread = s_all.std(0, unbiased=False) + 1e-6
         s_all = (s_all - mean) / spread
@@ -347,7 +366,7 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         cchp_error = torch.full((1,), -1.0, dtype=torch.float64)
         if motion_only:
             blend = torch.zeros(1, dtype=torch.float64)
-        elif self.blend_folds > 0 and x_c.size(0) > 1:
+        elif cross_validated:
             fitted_a, gain_a, cchp_a = self._cross_validated_blend(x_c, y_c, m, m_inv, y_anchor, anchor, sizes)
             fitted, gain, cchp_error = fitted_a.view(1), gain_a.view(1), cchp_a.view(1)
             used = (float(gain_a) >= self.min_gain and float(cchp_a) >= self.min_cchp_error
@@ -377,15 +396,28 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         else:
             own.append(torch.cat(parts + [fitted, gain]))
         own.append(cchp_error)  # last, so that every part before it keeps its place in memory
-        # One (K, D_in + ceil(own / K)) block whose memory is the CCHP's keys, then the kernel read's part:
-        # each part is read as a view of it, without a copy.
+        return self._keys_block(keys_in, k, torch.cat(own).to(torch.float32)), values, z_mu, z_sigma
+
+    def _keys_block(self, keys_in: torch.Tensor, k: int, own_flat: torch.Tensor) -> torch.Tensor:
+        """One (K, D_in + ceil(own / K)) block whose memory is the CCHP's keys, then the kernel read's part
+        (`own_flat`, at most `_own_size(K)` floats): each part is read as a view of it, without a copy."""
         d_in = keys_in.size(1)
         cols = d_in + (self._own_size(k) + k - 1) // k
         flat = torch.zeros(k * cols, dtype=torch.float32)
         flat[:k * d_in] = keys_in.reshape(-1)
-        own_flat = torch.cat(own).to(torch.float32)
         flat[k * d_in:k * d_in + own_flat.numel()] = own_flat
-        return flat.view(k, cols), values, z_mu, z_sigma
+        return flat.view(k, cols)
+
+    def _cchp_alone_keys(self, keys_in: torch.Tensor, k: int) -> torch.Tensor:
+        """The keys of a context read by the CCHP alone: the kernel read's part zeros but for A (0), A as
+        fitted (the fixed blend: not cross-validated), the gain and the CCHP's own error (-1: not measured)."""
+        own = torch.zeros(self._own_size(k), dtype=torch.float32)
+        a = self._anchors(k)
+        at = a * (a + self.shape_dim + 8)
+        own[at + self.extra_size - 2] = self.kernel_blend
+        own[at + self.extra_size - 1] = -1.0
+        own[self._own_size(k) - 1] = -1.0
+        return self._keys_block(keys_in, k, own)
 
     def _committed(self, r: torch.Tensor, sizes: torch.Tensor) -> torch.Tensor:
         """Rows of kernel reads (N, 6), each (1 - share) as it is + share x its dominant command (the axis
@@ -539,13 +571,15 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         mean_i, std, h2, c2, read_i, v, query_i = self.inner.step_read(
             x_t[:self.motion_feature_dim], h[hi:hi + 6], h[:hi], c[:hi], self._inner_keys(keys), values, z)
         extras = self._extras(keys)
-        q = self._standardise(x_t[self.motion_feature_dim:], extras)
         a_blend = self._blend_of(extras)
         if float(a_blend) == 0.0:
-            # The CCHP alone for this person (A = 0): its own step, exactly, without the kernel read's cost.
+            # The CCHP alone for this person (A = 0): its own step, exactly, without the kernel read's cost
+            # (the query's path-and-shape part, which only the kernel read's attention reads, is zeros).
             h_next = torch.cat([h2, mean_i, torch.zeros(self.match_max_steps)])
             c_next = torch.cat([c2, torch.zeros(6 + self.match_max_steps)])
-            return (mean_i, std, h_next, c_next, read_i.mean(0).view(1, 6), v, torch.cat([query_i, q.view(-1)]))
+            return (mean_i, std, h_next, c_next, read_i.mean(0).view(1, 6), v,
+                    torch.cat([query_i, torch.zeros(self.shape_dim, dtype=query_i.dtype)]))
+        q = self._standardise(x_t[self.motion_feature_dim:], extras)
         read_k = torch.mm(self._kernel(q, keys, extras), self._anchor_part(keys, a + self.shape_dim, 6))
         if self.commit_share > 0:
             read_k = self._committed(read_k.to(torch.float64), extras[2 * self.shape_dim + 2:2 * self.shape_dim + 8]

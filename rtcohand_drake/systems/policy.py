@@ -44,7 +44,9 @@ Input ports
                         (`feature_dim` = 36 + PATH_SHAPE_DIM, `learning.path_shape_policy`): the
                         source's skeleton (NaN when lost), turned into that input by a
                         `hand_features.PathShapeStream` whose memory is discrete state; the
-                        context pieces must then carry the same features (`to_policy_clip(path_shape=True)`)
+                        context pieces must then carry the same features (`to_policy_clip(path_shape=True)`);
+                        the port is left unread for a person the file reads with the CCHP alone
+                        (its blend A = 0 once the context is encoded)
 Output ports
   policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
@@ -162,6 +164,11 @@ class CchpPolicy(LeafSystem):
             keys, values, z_mu, z_sigma = self.module.encode_context(
                 torch.from_numpy(x_c), torch.from_numpy(y_c), torch.from_numpy(mask))
         self._keys, self._values = keys.contiguous(), values.contiguous()
+        # A file that reads the hand's path and shape, for a person it reads with the CCHP alone (A = 0):
+        # the box keeps its keypoints port, but neither reads it nor follows the path (the file pads the
+        # 36 features with zeros, which A = 0 never reads).
+        self._path_shape_read = self.feature_dim > FEATURE_DIM and not (
+            hasattr(self.module, "blend_choice") and float(self.module.blend_choice(self._keys)[0]) == 0.0)
         self._values_np = self._values.numpy().astype(np.float64)
         self.z_mu, self.z_sigma = z_mu.numpy().astype(np.float64), z_sigma.numpy().astype(np.float64)
         self.context_steps = int(keys.shape[0])
@@ -173,7 +180,8 @@ class CchpPolicy(LeafSystem):
         # TorchScript optimises a function on its first two calls (8-14 ms each here);
         # do that now, not inside the first policy periods of a real-time run.
         for _ in range(3):
-            self.step(np.zeros(self.feature_dim), np.zeros(6), np.zeros(H), np.zeros(H), self.z_mu)
+            self.step(np.zeros(self.feature_dim if self._path_shape_read else FEATURE_DIM), np.zeros(6),
+                      np.zeros(H), np.zeros(H), self.z_mu)
 
         self._x = self.DeclareVectorInputPort(GESTURE_FEATURES, FEATURE_DIM)
         self._resume = self.DeclareVectorInputPort(RESUME_COUNT, SCALAR_DIM)
@@ -267,7 +275,7 @@ class CchpPolicy(LeafSystem):
         jumped = self.release.is_jump(x)
         if jumped:  # the tracked hand jumped (learning.rest_release): no motion, and a fresh path
             x = np.zeros_like(x)
-        if self._shape is not None:  # the hand's path and shape: a lost hand holds its last skeleton
+        if self._shape is not None and self._path_shape_read:  # a lost hand holds its last skeleton
             self._stream.state = np.array(get(self._shape))
             keypoints = self._keypoints.Eval(context)
             seen = bool(np.isfinite(keypoints).all())
