@@ -24,12 +24,14 @@ the same machine.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import re
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -54,9 +56,27 @@ print(json.dumps({"rows": rows}))
 
 
 def _env(checkout: Path) -> dict:
+    """The environment that runs `checkout`'s code with `checkout`'s model files: its `rtcohand_drake`
+    first on the path, and its `models/` as the models package (`rtcohand_drake_models`, which an
+    editable install otherwise maps to the installed checkout's), through a link in a folder of its own."""
     env = dict(os.environ)
-    env["PYTHONPATH"] = str(checkout) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    links = Path(tempfile.gettempdir()) / f"bench_run_cost_models_{hashlib.sha1(str(checkout).encode()).hexdigest()[:12]}"
+    link = links / "rtcohand_drake_models"
+    if not link.exists():
+        links.mkdir(exist_ok=True)
+        link.symlink_to(checkout / "models", target_is_directory=True)
+    env["PYTHONPATH"] = os.pathsep.join([str(checkout), str(links)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     return env
+
+
+def check_checkout(checkout: Path) -> None:
+    """Fails unless `checkout`'s run would load its own code and its own model files."""
+    probe = ("import rtcohand_drake; from rtcohand_drake.cell.robot_files import models_dir; "
+             "print(rtcohand_drake.__file__); print(models_dir())")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=_env(checkout), cwd=checkout)
+    found = [Path(line).resolve() for line in done.stdout.split()]
+    if done.returncode or len(found) != 2 or not all(f.is_relative_to(checkout.resolve()) for f in found):
+        raise SystemExit(f"error: {checkout} would not run its own code and models: {found or done.stderr.strip()}")
 
 
 def fresh(checkout: Path) -> dict:
@@ -92,6 +112,8 @@ def main(argv=None) -> int:
     from rtcohand_drake.repo_paths import checkout_commit
 
     checkouts = {"this": REPO} | ({"other": args.compare_to.resolve()} if args.compare_to else {})
+    for path in checkouts.values():
+        check_checkout(path)
     rows = {name: {"fresh": [], "warm": []} for name in checkouts}
     for _ in range(args.repeats):
         for name, path in checkouts.items():
