@@ -158,11 +158,13 @@ its size is worth re-recording, or replacing by a more distinct one
 (`python -m rtcohand_drake.context_reading --context-file my_clips.h5` prints the same table)."""),
     new_code_cell('''from rtcohand_drake.analysis.context_reading import clips_from_file, held_out_readings, motion_table
 from rtcohand_drake.cell.robot_files import models_dir
-from rtcohand_drake.learning.policy_file import load_policy
-mine, _ = clips_from_file(work / "my_clips.h5", user_id, rate_hz=10.0)
+from rtcohand_drake.learning.policy_file import load_policy, reads_path_shape
+from rtcohand_drake.scenario import load_scenario
+model = models_dir() / load_scenario("inspection").policy.model  # the run's own policy file
+mine, _ = clips_from_file(work / "my_clips.h5", user_id, rate_hz=10.0, path_shape=reads_path_shape(model))
 if SHORT:
     mine = mine[::6]  # a quick look in the short mode
-readings = held_out_readings(load_policy(models_dir() / "cchp_default.pt"), mine, folds=3)
+readings = held_out_readings(load_policy(model), mine, folds=3)
 for motion, n, gain, word in motion_table(readings):
     print(f"{motion}: reading gain {gain:+.2f} over {n} clip(s): {word}")'''),
     new_code_cell('''duration = "10" if SHORT else "120"
