@@ -1,6 +1,7 @@
 """Latency of the exported policy's `step` against context length, beside an exact GP.
 
     python benchmarks/bench_policy_step.py [--model models/cchp_default.pt] [--out docs/results]
+        [--hand real|simulated]
 
 One CPU thread (as the Drake policy system runs it). For each context length K
 the context is encoded once with `encode_context`, then `step` (which also
@@ -11,6 +12,13 @@ regressor (RBF kernel on the 36 features, one output per motion dimension,
 float64) is timed on the same K: conditioning on the context (Cholesky,
 O(K^3)) and one prediction with its variance (O(K^2)), which is the scaling the
 paper argues against. Writes step_latency.json and step_latency.png.
+
+For a file that reads the hand's path and shape, `--hand real` (the default)
+turns the context's palm as fast as a real hand's, so that the file uses its
+kernel read and the time is that of its full step; `--hand simulated` leaves
+it slow, as a simulated person's, so that the fast-turn gate turns the
+context away and the time is that of the CCHP alone inside the file (its
+encoding included).
 """
 
 from __future__ import annotations
@@ -42,7 +50,7 @@ def load_or_build(path: pathlib.Path):
     return script_policy(Cchp().eval()), "untrained default-size CCHP (no shipped model found)"
 
 
-def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator):
+def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator, real_hand: bool = True):
     piece = 50  # 5 s clips at 10 Hz
     b = int(np.ceil(k / piece))
     f = int(policy.feature_dim)  # 36, or 351 for a file that reads the hand's path and shape
@@ -51,7 +59,7 @@ def bench_step(policy, k: int, steps: int, warmup: int, rng: np.random.Generator
     # file learned, and a palm that turns fast (features 3-5, about 2 rad/s a step, as a real hand's does):
     # a file that blends in a read of the person's own clips then uses it (A > 0), as for a recorded
     # person, and the time is that of its full step.
-    if f > 36:
+    if f > 36 and real_hand:
         x_c[:, :, 3:6] *= 10.0
     y_c = 0.1 * torch.tanh(5.0 * x_c[:, :, -6:])
     mask = torch.zeros(b, piece, dtype=torch.bool)
@@ -116,6 +124,9 @@ def main():
     p.add_argument("--gp-lengths", type=int, nargs="+", default=[150, 500, 1000, 2000, 5000])
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--warmup", type=int, default=300)
+    p.add_argument("--hand", choices=["real", "simulated"], default="real",
+                   help="a file that reads the path and shape: a context whose palm turns fast (its kernel read "
+                        "on) or slowly (the CCHP alone)")
     args = p.parse_args()
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
@@ -124,7 +135,7 @@ def main():
     policy, source = load_or_build(pathlib.Path(args.model))
     cchp = []
     for k in args.lengths:
-        r = bench_step(policy, k, args.steps, args.warmup, rng)
+        r = bench_step(policy, k, args.steps, args.warmup, rng, args.hand == "real")
         cchp.append(r)
         print(f"CCHP step   K={k:6d}: p50 {r['p50']:.3f} ms  p99 {r['p99']:.3f} ms  (encode_context {r['encode_context_s']:.2f} s)")
         if "step_read" in r:
@@ -136,7 +147,7 @@ def main():
         r = bench_gp(k, 200, rng)
         gp.append(r)
         print(f"exact GP    K={k:6d}: predict p50 {r['p50']:.3f} ms  p99 {r['p99']:.3f} ms  condition {r['condition_s']:.2f} s")
-    result = {"model": source, "threads": 1, "torch": str(torch.__version__), "cchp": cchp, "exact_gp": gp}
+    result = {"model": source, "hand": args.hand, "threads": 1, "torch": str(torch.__version__), "cchp": cchp, "exact_gp": gp}
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "step_latency.json").write_text(json.dumps(result, indent=1))
