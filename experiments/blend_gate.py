@@ -28,6 +28,7 @@ def main(argv=None) -> int:
     from rtcohand_drake.data.sampling import evaluation_episodes, pack_context
     from rtcohand_drake.learning.evaluate import stepped_policy_mse
     from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.learning.path_shape_policy import encode_fitted
     from rtcohand_drake.learning.train import load_clips
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -47,7 +48,7 @@ def main(argv=None) -> int:
     for i, (e_n, e_w) in enumerate(zip(narrow_eps, wide_eps)):
         e_f = e_w if int(wide.feature_dim) > FEATURE_DIM else e_n  # the episode as FILE reads it
         x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(e_f.context))
-        keys = getattr(wide, "encode_context_fitted", wide.encode_context)(x_c, y_c, mask)[0]
+        keys = encode_fitted(wide, x_c, y_c, mask)[0]
         used, fitted, gain = (float(v) for v in wide.blend_choice(keys)[:3])
         rows.append({"episode": i, "a_used": used, "a_fitted": fitted, "gain": gain,
                      "zero": float(np.mean(np.asarray(e_n.target.labels, np.float64) ** 2)),

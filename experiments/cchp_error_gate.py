@@ -33,6 +33,7 @@ def main(argv=None) -> int:
     from rtcohand_drake.data.sampling import evaluation_episodes, pack_context
     from rtcohand_drake.learning.evaluate import stepped_policy_mse
     from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.learning.path_shape_policy import encode_fitted
     from rtcohand_drake.learning.train import load_clips
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -50,8 +51,7 @@ def main(argv=None) -> int:
 
     def choice(pieces):
         x, y, m = (torch.from_numpy(a) for a in pack_context(pieces))
-        encode = getattr(module, "encode_context_fitted", module.encode_context)  # fitted whatever the gates
-        return [float(v) for v in module.blend_choice(encode(x, y, m)[0])]
+        return [float(v) for v in module.blend_choice(encode_fitted(module, x, y, m)[0])]
 
     rows = []
     if args.people:

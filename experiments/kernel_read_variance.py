@@ -30,13 +30,13 @@ def variances(module, context, features, keypoints):
     import torch
 
     from rtcohand_drake.data.sampling import pack_context
+    from rtcohand_drake.learning.path_shape_policy import encode_fitted
     from rtcohand_drake.learning.rest_release import fit_rest_release, guard_stream
 
     x_c, y_c, mask = pack_context(context)
     with torch.no_grad():
-        keys, values, z, _ = getattr(module, "encode_context_fitted", module.encode_context)(
-            torch.from_numpy(x_c), torch.from_numpy(y_c),
-                                                   torch.from_numpy(mask))
+        keys, values, z, _ = encode_fitted(module, torch.from_numpy(x_c), torch.from_numpy(y_c),
+                                           torch.from_numpy(mask))
         stream = guard_stream(fit_rest_release(context), np.nan_to_num(features), keypoints, 10.0)
         extras = module._extras(keys)
         anchors = module._anchors(keys.size(0))

@@ -315,9 +315,9 @@ def read_choice(module, clips: Sequence[LabelledClip]) -> str | None:
     from rtcohand_drake.data.sampling import pack_context
 
     x, y, m = (torch.from_numpy(a) for a in pack_context([(c.features, c.labels) for c in clips]))
-    # A file that skips the kernel read's fit for a context the fast-turn gate turns away measures it here.
-    encode = getattr(module, "encode_context_fitted", module.encode_context)
-    used, _, _, cchp_error = (float(v) for v in module.blend_choice(encode(x, y, m)[0]))
+    from rtcohand_drake.learning.path_shape_policy import encode_fitted
+
+    used, _, _, cchp_error = (float(v) for v in module.blend_choice(encode_fitted(module, x, y, m)[0]))
     fast = float(module.fast_turn_share(x, m))
     why = (f"the CCHP alone reads these clips at {cchp_error:.2f} of zero twist's squared error (the kernel read "
            f"from {float(module.min_cchp_error):g}), and the palm turns faster than {float(module.fast_turn_rad_s):g} "

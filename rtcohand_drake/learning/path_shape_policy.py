@@ -647,6 +647,13 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
         return read, torch.cat([cost, pad]), torch.cat([length, pad])
 
 
+def encode_fitted(module, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor):
+    """`module.encode_context`, with a path-and-shape file's kernel read fitted and cross-validated whatever
+    its fast-turn gate says (`encode_context_fitted`, where the file has it): for reports and measurements
+    of that read."""
+    return getattr(module, "encode_context_fitted", module.encode_context)(x_c, y_c, mask)
+
+
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
