@@ -161,20 +161,37 @@ def _build(args, scenario, meshcat, station=None):
         raise
 
 
+def _policy_context(model, load):
+    """(pieces, user) from `load(path_shape)` for the policy file `model`. A file that reads the hand's path
+    and shape gets them, unless its fast-turn gate reads this person with the CCHP alone: the 36 features
+    then give the same read, and the path and shape are not built (about 0.3-0.8 s of start-up)."""
+    from rtcohand_drake.data.hand_features import FEATURE_DIM
+    from rtcohand_drake.data.sampling import pack_context
+    from rtcohand_drake.learning.path_shape_policy import turned_away_by_fast_turns
+
+    if int(model.feature_dim) <= FEATURE_DIM:
+        return load(False)
+    pieces, user = load(False)
+    if pieces:
+        x_c, _, mask = pack_context(pieces)
+        if turned_away_by_fast_turns(model, x_c, mask):
+            return pieces, user
+    return load(True)
+
+
 def _build_with_policy(args, scenario, meshcat, station, model, setup):
     from rtcohand_drake.data.dataset import context_pieces, label_lag_s, missing_motions
-    from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.diagram import build_run_diagram
     from rtcohand_drake.systems.policy import CchpPolicy
 
     rate = scenario.policy.rate_hz
-    path_shape = int(model.feature_dim) > FEATURE_DIM  # a policy file that reads the hand's path and shape
     user, lag = None, 0.0
     if args.context_file is not None:
-        pieces, user = context_pieces(args.context_file, args.context_user, rate, path_shape=path_shape)
+        pieces, user = _policy_context(
+            model, lambda wide: context_pieces(args.context_file, args.context_user, rate, path_shape=wide))
         lag = label_lag_s(args.context_file)
     elif setup.default_context is not None:
-        pieces = setup.default_context(path_shape=path_shape)
+        pieces, _ = _policy_context(model, lambda wide: (setup.default_context(path_shape=wide), None))
     else:
         raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
                          "(the user's own labelled clips)")

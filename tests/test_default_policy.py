@@ -61,3 +61,35 @@ def test_context_reading_checks_every_persons_clips_with_the_one_default_file(fi
         printed = capsys.readouterr().out
         assert "policy cchp_path_shape.pt" in printed
         assert "read: the CCHP alone: the CCHP alone reads these clips at " in printed  # the palm turns slowly
+
+
+def test_the_run_builds_the_path_and_shape_only_for_a_person_the_default_file_reads_with_them(files):
+    """The run asks the context for the hand's path and shape only where the default file's fast-turn gate
+    lets the kernel read in: a simulated person (the palm never turns fast) is read from the 36 features
+    alone, which give the same read; a person whose palm turns fast brings the path and shape; a file of
+    the 36 features alone never asks for them."""
+    from rtcohand_drake.data.dataset import context_pieces
+    from rtcohand_drake.learning.policy_file import load_policy
+    from rtcohand_drake.run import _policy_context
+
+    generated, _ = files
+    with h5py.File(generated) as f:
+        user = sorted(f["users"])[0]
+    asked = []
+
+    def load(wide, palm_turn=None):
+        asked.append(wide)
+        pieces, who = context_pieces(generated, user, 10.0, path_shape=wide)
+        for x, _ in pieces if palm_turn is not None else ():
+            x[:, 3:6] = palm_turn  # the palm turning at sqrt(3) x palm_turn rad/s in every step
+        return pieces, who
+
+    one_file = load_policy(MODELS / "cchp_path_shape.pt")
+    pieces, who = _policy_context(one_file, load)
+    assert asked == [False] and who == user and {x.shape[1] for x, _ in pieces} == {36}
+    asked.clear()
+    pieces, _ = _policy_context(one_file, lambda wide: load(wide, palm_turn=3.0))
+    assert asked == [False, True] and {x.shape[1] for x, _ in pieces} == {int(one_file.feature_dim)} != {36}
+    asked.clear()
+    _policy_context(load_policy(MODELS / "cchp_default.pt"), load)
+    assert asked == [False]

@@ -211,14 +211,16 @@ def person_file(tmp_path_factory):
 
 def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_path, person_file):
     """In the run diagram, the box turns the replayed skeleton into the path and shape itself; its
-    twist is the module's, stepped offline on the clip's features."""
+    twist is the module's, stepped offline on the clip's features. (The file's gates are off, so that this
+    simulated person gets the kernel read, and must bring the path and shape.)"""
     from rtcohand_drake.diagram import build_run_diagram
     from rtcohand_drake.data.hand_features import resample
     from rtcohand_drake.scenario import load_scenario
     from rtcohand_drake.systems.gestures.replay import ReplayGestureSource
     from rtcohand_drake.systems.policy import CchpPolicy
 
-    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt")
+    path = build_path_shape_policy(_inner_policy(tmp_path), tmp_path / "wide.pt", min_cchp_error=0.0,
+                                   min_fast_turns=0.0)
     raw = read_dataset(person_file)
     target = raw[0]
     wide = [to_policy_clip(c, 10.0, path_shape=True) for c in raw[1:6] if c.user == target.user]
@@ -239,6 +241,7 @@ def test_the_policy_box_reads_the_sources_skeleton_as_the_file_does_offline(tmp_
     module = load_policy(path)
     x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(pieces))
     keys, values, _, _ = module.encode_context(x_c, y_c, mask)
+    assert float(module.blend_choice(keys)[0]) > 0.0  # the kernel read is used
     H = int(module.hidden_size)
     h, c, y, z = torch.zeros(H), torch.zeros(H), torch.zeros(6), torch.from_numpy(policy.sample_z(0).astype(np.float32))
     # The replayed skeleton, as the box sees it, through the stream (the file's own path-and-shape
@@ -508,6 +511,25 @@ def test_the_kernel_read_steps_in_only_for_a_person_the_cchp_does_not_read(tmp_p
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_fast_turns=1.5)
 
 
+def _box_twists(model, pieces, features, keypoints):
+    """The policy box's twist, period by period, for the steps `features` (the skeleton `keypoints`
+    held, where given); and the box."""
+    from rtcohand_drake.interfaces import GESTURE_FEATURES, POLICY_MEAN
+    from rtcohand_drake.systems.policy import CchpPolicy
+
+    box = CchpPolicy(model, pieces, 10.0, seed=2, rest_release=False, command_hold=False)
+    simulator = Simulator(box)
+    ctx = simulator.get_mutable_context()
+    out = []
+    for k, x in enumerate(features):  # each period's features, then the box's update at k / 10 s
+        box.GetInputPort(GESTURE_FEATURES).FixValue(ctx, x)
+        if keypoints is not None:
+            box.GetInputPort(KEYPOINTS).FixValue(ctx, keypoints)
+        simulator.AdvanceTo(k * 0.1 + 0.05)
+        out.append(box.GetOutputPort(POLICY_MEAN).Eval(ctx).copy())
+    return np.array(out), box
+
+
 def test_the_box_of_a_person_the_file_reads_with_the_cchp_alone_is_the_cchp_box_and_leaves_the_skeleton(tmp_path):
     """A person the fast-turn gate turns away: the policy box with the wide file gives, period by period,
     the twist of the box with its CCHP file alone, and never reads its keypoints port (left unconnected
@@ -520,19 +542,7 @@ def test_the_box_of_a_person_the_file_reads_with_the_cchp_alone_is_the_cchp_box_
     rng = np.random.default_rng(11)
     context, fast_turns = _fast_turning_context(rng)
     features = _pieces(rng, [12])[0][0][:, :FEATURE_DIM]
-
-    def twists(model, pieces, keypoints):
-        box = CchpPolicy(model, pieces, 10.0, seed=2, rest_release=False, command_hold=False)
-        simulator = Simulator(box)
-        ctx = simulator.get_mutable_context()
-        out = []
-        for k, x in enumerate(features):  # each period's features, then the box's update at k / 10 s
-            box.GetInputPort(GESTURE_FEATURES).FixValue(ctx, x)
-            if keypoints is not None:
-                box.GetInputPort(KEYPOINTS).FixValue(ctx, keypoints)
-            simulator.AdvanceTo(k * 0.1 + 0.05)
-            out.append(box.GetOutputPort(POLICY_MEAN).Eval(ctx).copy())
-        return np.array(out), box
+    twists = lambda model, pieces, keypoints: _box_twists(model, pieces, features, keypoints)  # noqa: E731
 
     narrow = [(x[:, :FEATURE_DIM], y) for x, y in context]
     alone, _ = twists(inner_path, narrow, None)
@@ -546,6 +556,37 @@ def test_the_box_of_a_person_the_file_reads_with_the_cchp_alone_is_the_cchp_box_
         twists(let_through, context, None)
     skeleton = rng.normal(0.0, 0.05, 63)
     assert not np.allclose(twists(let_through, context, skeleton)[0], alone, atol=1e-4)
+
+
+def test_the_box_takes_the_36_features_alone_from_a_person_the_fast_turn_gate_turns_away(tmp_path):
+    """`turned_away_by_fast_turns` asks the file's own gate from the 36 features: for a person it turns
+    away, the box built from those alone gives, period by period, the twist of the box built from the full
+    features (so a run need not build the path and shape); a person it lets through must bring them, and a
+    file without the gate, or a context of one clip (whose blend is not cross-validated), is never
+    turned away."""
+    from rtcohand_drake.learning.path_shape_policy import turned_away_by_fast_turns
+
+    inner_path = _inner_policy(tmp_path)
+    rng = np.random.default_rng(11)
+    context, fast_turns = _fast_turning_context(rng)
+    features = _pieces(rng, [12])[0][0][:, :FEATURE_DIM]
+    narrow = [(x[:, :FEATURE_DIM].copy(), y) for x, y in context]
+    away = build_path_shape_policy(inner_path, tmp_path / "away.pt",
+                                   **{**GATE_TEST_SETTINGS, "min_fast_turns": fast_turns + 0.02})
+    through = build_path_shape_policy(inner_path, tmp_path / "through.pt",
+                                      **{**GATE_TEST_SETTINGS, "min_fast_turns": fast_turns - 0.02})
+    x_c, _, mask = pack_context(narrow)
+    assert turned_away_by_fast_turns(load_policy(away), x_c, mask)
+    assert not turned_away_by_fast_turns(load_policy(through), x_c, mask)
+    assert not turned_away_by_fast_turns(load_policy(inner_path), x_c, mask)
+    one_clip, _, one_mask = pack_context(narrow[:1])
+    assert not turned_away_by_fast_turns(load_policy(away), one_clip, one_mask)
+    from_narrow, box = _box_twists(away, narrow, features, None)
+    from_wide, _ = _box_twists(away, context, features, None)
+    assert box.HasInputPort(KEYPOINTS) and np.abs(from_wide).max() > 1e-3
+    np.testing.assert_array_equal(from_narrow, from_wide)
+    with pytest.raises(InputError, match="reads 351 features per step, the context pieces have \\[36\\]"):
+        _box_twists(through, narrow, features, None)
 
 
 def test_a_caller_of_the_36_features_alone_gets_the_cchp_exactly(tmp_path):

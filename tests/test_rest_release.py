@@ -115,6 +115,26 @@ def test_gate_falls_as_written_and_only_for_a_person_who_rests():
     assert "no rest between gestures" in rr.release_advice(rr.RestRelease())
 
 
+def test_the_gates_over_a_stream_are_the_box_s_step_by_step_gates():
+    """`gates` (one pass over an array, as the fit and the benchmarks use it) gives exactly what the box's
+    `next_count` and `gate` give step by step, from a still count of 0: lost (NaN) steps, runs of still
+    steps longer and shorter than the gate's fall, a release that is off."""
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        n = int(rng.integers(1, 60))
+        x = rr.SCALES * rng.uniform(0.0, 2.0, (n, 1)) * rng.uniform(0.5, 1.5, (n, FEATURE_DIM))
+        x[rng.random(n) < 0.4] *= 0.01  # still steps, in runs of every length
+        x[rng.random((n, FEATURE_DIM)) < 0.02] = np.nan
+        release = rr.RestRelease(theta=0.5, on=trial % 5 != 0)
+        count, expected = 0.0, []
+        for step in x:
+            count = release.next_count(count, step)
+            expected.append(release.gate(count))
+        assert np.array_equal(release.gates(x), np.array(expected))
+        assert np.array_equal(rr.motions(x), np.array([release.motion(step) for step in x]))
+    assert rr.RestRelease(theta=0.5, on=True).gates(np.zeros((0, FEATURE_DIM))).shape == (0,)
+
+
 def test_labels_placed_later_than_the_gesture_are_fitted_where_the_gesture_is(tmp_path):
     """A recorder session's labels follow the gesture by the protocol's `label_lag_s`: fitted as they are,
     each outlasts the still hand and the release turns itself off; fitted with the lag, it is the release

@@ -654,6 +654,25 @@ def encode_fitted(module, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tens
     return getattr(module, "encode_context_fitted", module.encode_context)(x_c, y_c, mask)
 
 
+def turned_away_by_fast_turns(module, x_c, mask) -> bool:
+    """True when a path-and-shape file's fast-turn gate reads this context with the CCHP alone.
+
+    `x_c` (B, T, >= 36) and `mask` (B, T), numpy or torch, as `pack_context` gives them; only the 36
+    hand-part velocities are looked at, so the caller need not build the hand's path and shape to ask.
+    The test is the file's own (`_encode`): the gate is on, the context has more than one clip (else the
+    blend is not cross-validated), and the palm turns fast in too few of its moving steps. A file
+    without the gate, or any other file, gives False. For such a context the file's encoding of the 36
+    features alone equals that of the full features (the keys, values and latent), and so does every
+    step: a caller may then give it the 36 features and skip the path and shape."""
+    if not all(hasattr(module, a) for a in ("fast_turn_share", "min_fast_turns", "blend_folds")):
+        return False
+    if float(module.min_fast_turns) <= 0.0 or int(module.blend_folds) <= 0 or int(x_c.shape[0]) <= 1:
+        return False
+    x = torch.as_tensor(x_c)[:, :, :FEATURE_DIM]
+    m = torch.as_tensor(mask).to(torch.bool)
+    return float(module.fast_turn_share(x, m)) < float(module.min_fast_turns)
+
+
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,

@@ -101,12 +101,28 @@ class RestRelease:
         return float(np.clip((self.still_to - count) / (self.still_to - self.still_from), 0.0, 1.0))
 
     def gates(self, features: np.ndarray) -> np.ndarray:
-        """(T,) g over a stream of features (T, >= 36), from a still count of 0."""
-        out, n = np.ones(len(features)), 0.0
-        for t, x in enumerate(features):
-            n = self.next_count(n, x)
-            out[t] = self.gate(n)
-        return out
+        """(T,) g over a stream of features (T, >= 36), from a still count of 0: step by step what
+        `next_count` and `gate` give, in one pass over the array."""
+        return self.gates_of_motion(motions(features))
+
+    def gates_of_motion(self, m: np.ndarray) -> np.ndarray:
+        """(T,) g over a stream whose steps' motions (`motions`) are m, from a still count of 0."""
+        m = np.asarray(m, np.float64).reshape(-1)
+        if not self.on:
+            return np.ones(len(m))
+        still = m < self.theta
+        steps = np.arange(len(m))
+        # n(t): the steps since the last one that moved (t + 1 when none has yet), 0 on a moving step.
+        moved = np.maximum.accumulate(np.where(still, -1, steps)) if len(m) else steps
+        n = np.where(still, steps - moved, 0).astype(np.float64)
+        return np.clip((self.still_to - n) / (self.still_to - self.still_from), 0.0, 1.0)
+
+
+def motions(features: np.ndarray) -> np.ndarray:
+    """(T,) `RestRelease.motion` of each step of features (T, >= 36)."""
+    x = np.asarray(features, np.float64)
+    x = np.nan_to_num((x if x.ndim == 2 else x.reshape(len(x), -1))[:, :FEATURES])
+    return np.sqrt(np.mean((x / SCALES) ** 2, axis=1))
 
 
 def release_advice(release: RestRelease) -> str | None:
@@ -157,9 +173,10 @@ def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]], label_lag_
     sizes = np.abs(y).max(0)
     release = RestRelease(jump=float(JUMP_RATIO * np.sqrt(np.mean((x / SCALES) ** 2, axis=1)).max()))
     scaled = np.where(sizes > 0, np.abs(y) / np.where(sizes > 0, sizes, 1.0), 0.0)
-    rest, moving = [], []
+    rest, moving, piece_motions = [], [], []
     for f, l in pieces:
-        m = np.sqrt(np.mean((f / SCALES) ** 2, axis=1))
+        m = motions(f)
+        piece_motions.append(m)
         on = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= COMMANDING
         labelled = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= QUIET
         rest.append(m[~_near_label(labelled, REST_MARGIN)])
@@ -172,7 +189,8 @@ def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]], label_lag_
         release.floor = floor
         release.theta = float(max(jitter, floor * np.median(moving)))
         release.on = True
-        taken = sum(float((((1.0 - release.gates(f)) ** 2)[:, None] * l ** 2).sum()) for f, l in pieces)
+        taken = sum(float((((1.0 - release.gates_of_motion(m)) ** 2)[:, None] * l ** 2).sum())
+                    for m, (_, l) in zip(piece_motions, pieces))
         release.harm = taken / max(float((y ** 2).sum()), 1e-12)
         release.on = release.harm <= HARM
         if release.on:

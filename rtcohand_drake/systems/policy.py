@@ -44,9 +44,11 @@ Input ports
                         (`feature_dim` = 36 + PATH_SHAPE_DIM, `learning.path_shape_policy`): the
                         source's skeleton (NaN when lost), turned into that input by a
                         `hand_features.PathShapeStream` whose memory is discrete state; the
-                        context pieces must then carry the same features (`to_policy_clip(path_shape=True)`);
-                        the port is left unread for a person the file reads with the CCHP alone
-                        (its blend A = 0 once the context is encoded)
+                        context pieces must then carry the same features (`to_policy_clip(path_shape=True)`),
+                        or the 36 alone for a person the file's fast-turn gate reads with the CCHP
+                        alone (`path_shape_policy.turned_away_by_fast_turns`: the same read, without
+                        building the path and shape); the port is left unread for a person the file
+                        reads with the CCHP alone (its blend A = 0 once the context is encoded)
 Output ports
   policy_mean      (6)  predicted twist [vx vy vz wx wy wz], m/s and rad/s, user frame (see above)
   policy_std       (6)
@@ -150,12 +152,21 @@ class CchpPolicy(LeafSystem):
         self._has_read = hasattr(self.module, "step_read") and hasattr(self.module, "attention_of")
         self.feature_dim = int(getattr(self.module, "feature_dim", FEATURE_DIM))
         widths = {np.shape(x)[1] for x, _ in context_pieces if np.ndim(x) == 2}
-        if widths and widths != {self.feature_dim}:
-            raise InputError(f"{self.model_path or 'policy'}: reads {self.feature_dim} features per step, the "
-                             f"context pieces have {sorted(widths)}" + (
-                                 " (a policy that reads the hand's path and shape needs context clips loaded "
-                                 "with it: to_policy_clip(path_shape=True))" if self.feature_dim > FEATURE_DIM else ""))
+        # A file that reads the path and shape takes the 36 features alone from a person its fast-turn gate
+        # reads with the CCHP alone (learning.path_shape_policy.turned_away_by_fast_turns): the same read.
+        narrow = self.feature_dim > FEATURE_DIM and widths == {FEATURE_DIM}
+        mismatch = InputError(
+            f"{self.model_path or 'policy'}: reads {self.feature_dim} features per step, the context pieces have "
+            f"{sorted(widths)}" + (" (a policy that reads the hand's path and shape needs context clips loaded "
+                                   "with it: to_policy_clip(path_shape=True))" if self.feature_dim > FEATURE_DIM else ""))
+        if widths and widths != {self.feature_dim} and not narrow:
+            raise mismatch
         x_c, y_c, mask = pack_context(context_pieces)
+        if narrow:
+            from rtcohand_drake.learning.path_shape_policy import turned_away_by_fast_turns
+
+            if not turned_away_by_fast_turns(self.module, x_c, mask):
+                raise mismatch
         # The jump guard is always on; the gate as asked.
         self.release = fit_rest_release(context_pieces, int(round(float(label_lag_s) * rate_hz)))
         self.release.on = self.release.on and bool(rest_release)
