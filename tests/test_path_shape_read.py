@@ -589,6 +589,30 @@ def test_the_box_takes_the_36_features_alone_from_a_person_the_fast_turn_gate_tu
         _box_twists(through, narrow, features, None)
 
 
+def test_a_file_wrapped_around_the_path_and_shape_file_reads_the_skeleton_whatever_its_own_blend(tmp_path):
+    """A ridge blend built over a path-and-shape file (`ridge_blend_policy`, the three reads in one file)
+    gives its ridge's blend in `blend_choice`, not the kernel read's A: with the ridge off (B = 0) and the
+    kernel read on, the box still needs the skeleton, and is never offered the 36 features alone."""
+    from rtcohand_drake.learning.path_shape_policy import turned_away_by_fast_turns
+    from rtcohand_drake.learning.ridge_blend_policy import build_ridge_blend_policy
+
+    inner_path = _inner_policy(tmp_path)
+    rng = np.random.default_rng(11)
+    context, _ = _fast_turning_context(rng)
+    features = _pieces(rng, [12])[0][0][:, :FEATURE_DIM]
+    path_shape = build_path_shape_policy(inner_path, tmp_path / "through.pt", **GATE_TEST_SETTINGS)
+    stacked = load_policy(build_ridge_blend_policy(path_shape, tmp_path / "stacked.pt", min_gain=0.99))
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys = stacked.encode_context(x_c, y_c, mask)[0]
+    inner_keys = load_policy(path_shape).encode_context(x_c, y_c, mask)[0]
+    assert float(stacked.blend_choice(keys)[0]) == 0.0  # the ridge off
+    assert float(load_policy(path_shape).blend_choice(inner_keys)[0]) > 0.0  # the kernel read on
+    with pytest.raises(RuntimeError, match="keypoints"):
+        _box_twists(stacked, context, features, None)
+    narrow = [(x[:, :FEATURE_DIM].copy(), y) for x, y in context]
+    assert not turned_away_by_fast_turns(stacked, *pack_context(narrow)[::2])
+
+
 def test_a_caller_of_the_36_features_alone_gets_the_cchp_exactly(tmp_path):
     """A file that reads the path and shape is still a policy of the paper's 36 features (the exported
     policy's contract): given a context and steps of those alone, it is read by the CCHP alone, exactly,

@@ -178,8 +178,11 @@ class CchpPolicy(LeafSystem):
         # A file that reads the hand's path and shape, for a person it reads with the CCHP alone (A = 0):
         # the box keeps its keypoints port, but neither reads it nor follows the path (the file pads the
         # 36 features with zeros, which A = 0 never reads).
+        # (Only a path-and-shape file's own `blend_choice` gives its A: a file wrapped around one, such as
+        # learning.ridge_blend_policy's, gives its own blend there, so the box reads the skeleton for it.)
         self._path_shape_read = self.feature_dim > FEATURE_DIM and not (
-            hasattr(self.module, "blend_choice") and float(self.module.blend_choice(self._keys)[0]) == 0.0)
+            hasattr(self.module, "kernel_blend") and hasattr(self.module, "blend_choice")
+            and float(self.module.blend_choice(self._keys)[0]) == 0.0)
         self._values_np = self._values.numpy().astype(np.float64)
         self.z_mu, self.z_sigma = z_mu.numpy().astype(np.float64), z_sigma.numpy().astype(np.float64)
         self.context_steps = int(keys.shape[0])
