@@ -161,16 +161,20 @@ def _build(args, scenario, meshcat, station=None):
         raise
 
 
-def _policy_context(model, load):
+def _policy_context(model, load, real_hands: bool = False):
     """(pieces, user) from `load(path_shape)` for the policy file `model`. A file that reads the hand's path
     and shape gets them, unless its fast-turn gate reads this person with the CCHP alone: the 36 features
-    then give the same read, and the path and shape are not built (about 0.3-0.8 s of start-up)."""
+    then give the same read, and the path and shape are not built (about 0.3-0.8 s of start-up). Clips of
+    a real hand (`real_hands`), whose palm turns fast, are loaded with them at once, so that they are not
+    read twice (the gate still decides, from the full features)."""
     from rtcohand_drake.data.hand_features import FEATURE_DIM
     from rtcohand_drake.data.sampling import pack_context
     from rtcohand_drake.learning.path_shape_policy import turned_away_by_fast_turns
 
     if int(model.feature_dim) <= FEATURE_DIM:
         return load(False)
+    if real_hands:
+        return load(True)
     pieces, user = load(False)
     if pieces:
         x_c, _, mask = pack_context(pieces)
@@ -180,18 +184,22 @@ def _policy_context(model, load):
 
 
 def _build_with_policy(args, scenario, meshcat, station, model, setup):
-    from rtcohand_drake.data.dataset import context_pieces, label_lag_s, missing_motions
+    from rtcohand_drake.data.dataset import context_pieces, is_generated, label_lag_s, missing_motions
     from rtcohand_drake.diagram import build_run_diagram
+    from rtcohand_drake.systems.gestures.registry import reads_real_hands
     from rtcohand_drake.systems.policy import CchpPolicy
 
     rate = scenario.policy.rate_hz
     user, lag = None, 0.0
+    real_hands = reads_real_hands(args.gesture_source, getattr(args, "gesture_file", None))
     if args.context_file is not None:
         pieces, user = _policy_context(
-            model, lambda wide: context_pieces(args.context_file, args.context_user, rate, path_shape=wide))
+            model, lambda wide: context_pieces(args.context_file, args.context_user, rate, path_shape=wide),
+            real_hands=not all(is_generated(path) for path in args.context_file))
         lag = label_lag_s(args.context_file)
     elif setup.default_context is not None:
-        pieces, _ = _policy_context(model, lambda wide: (setup.default_context(path_shape=wide), None))
+        pieces, _ = _policy_context(model, lambda wide: (setup.default_context(path_shape=wide), None),
+                                    real_hands=real_hands)
     else:
         raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
                          "(the user's own labelled clips)")
@@ -205,10 +213,9 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
               f"read wrongly; record them: {record}", file=sys.stderr)
     policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=args.seed, label_lag_s=lag)
     from rtcohand_drake.learning.rest_release import release_advice
-    from rtcohand_drake.systems.gestures.registry import reads_real_hands
 
     advice = release_advice(policy.release) if scenario.policy.rest_release else None
-    if advice is not None and reads_real_hands(args.gesture_source, getattr(args, "gesture_file", None)):
+    if advice is not None and real_hands:
         print(f"warning: {advice}", file=sys.stderr)
     return build_run_diagram(scenario, source=setup.source, policy=policy, meshcat=meshcat, station=station,
                              gesture_source=args.gesture_source), setup.end_time

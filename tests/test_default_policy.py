@@ -67,7 +67,7 @@ def test_the_run_builds_the_path_and_shape_only_for_a_person_the_default_file_re
     """The run asks the context for the hand's path and shape only where the default file's fast-turn gate
     lets the kernel read in: a simulated person (the palm never turns fast) is read from the 36 features
     alone, which give the same read; a person whose palm turns fast brings the path and shape; a file of
-    the 36 features alone never asks for them."""
+    the 36 features alone never asks for them; a real hand's clips are read once, with them."""
     from rtcohand_drake.data.dataset import context_pieces
     from rtcohand_drake.learning.policy_file import load_policy
     from rtcohand_drake.run import _policy_context
@@ -93,3 +93,7 @@ def test_the_run_builds_the_path_and_shape_only_for_a_person_the_default_file_re
     asked.clear()
     _policy_context(load_policy(MODELS / "cchp_default.pt"), load)
     assert asked == [False]
+    # A real hand's clips (a recording, a tracker's source) are loaded once, with the path and shape.
+    asked.clear()
+    pieces, _ = _policy_context(one_file, load, real_hands=True)
+    assert asked == [True] and {x.shape[1] for x, _ in pieces} == {int(one_file.feature_dim)}
