@@ -53,10 +53,10 @@ def cchp_cv_share(module, context, rows: int = 12) -> float:
     the box steps it with the clips of the other folds as context, as a share of zero twist's error."""
     import torch
 
+    from rtcohand_drake.analysis.context_reading import play_clip
     from rtcohand_drake.data.sampling import pack_context
 
     picked = sorted({int(round(i)) for i in np.linspace(0, len(context) - 1, min(rows, len(context)))})
-    H = int(module.hidden_size)
     err = zero = 0.0
     for fold in range(FOLDS):
         held = [b for b in picked if b % FOLDS == fold]
@@ -68,13 +68,9 @@ def cchp_cv_share(module, context, rows: int = 12) -> float:
             keys, values, z_mu, _ = module.encode_context(x_c, y_c, mask)
             for b in held:
                 x, y = context[b]
-                h, c, y_prev = torch.zeros(H), torch.zeros(H), torch.zeros(6)
-                out = []
-                for step in np.nan_to_num(np.asarray(x, np.float32)):
-                    y_prev, _, h, c, _ = module.step(torch.from_numpy(step), y_prev, h, c, keys, values, z_mu)
-                    out.append(y_prev.numpy())
+                out = play_clip(module, np.nan_to_num(np.asarray(x, np.float32)), keys, values, z_mu)
                 y = np.nan_to_num(np.asarray(y, np.float64))
-                err += float(((np.array(out, np.float64) - y) ** 2).sum())
+                err += float(((out - y) ** 2).sum())
                 zero += float((y ** 2).sum())
     return err / zero if zero > 0 else float("inf")
 

@@ -168,15 +168,13 @@ def fit_rest_release(pieces: Sequence[tuple[np.ndarray, np.ndarray]], label_lag_
               for f, y in pieces if y is not None and len(f) > 0]
     if not pieces:
         return RestRelease()
-    x = np.concatenate([f for f, _ in pieces])
     y = np.concatenate([l for _, l in pieces])
     sizes = np.abs(y).max(0)
-    release = RestRelease(jump=float(JUMP_RATIO * np.sqrt(np.mean((x / SCALES) ** 2, axis=1)).max()))
+    piece_motions = [motions(f) for f, _ in pieces]
+    release = RestRelease(jump=float(JUMP_RATIO * max(m.max() for m in piece_motions)))
     scaled = np.where(sizes > 0, np.abs(y) / np.where(sizes > 0, sizes, 1.0), 0.0)
-    rest, moving, piece_motions = [], [], []
-    for f, l in pieces:
-        m = motions(f)
-        piece_motions.append(m)
+    rest, moving = [], []
+    for m, (_, l) in zip(piece_motions, pieces):
         on = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= COMMANDING
         labelled = (np.abs(l) / np.where(sizes > 0, sizes, 1.0)).max(1) >= QUIET
         rest.append(m[~_near_label(labelled, REST_MARGIN)])
