@@ -19,14 +19,18 @@ MODELS = pathlib.Path(__file__).resolve().parents[1] / "models"
 CORE = MODELS / "cchp_default.pt"  # the shipped CCHP
 
 
-def _stepped(module, x, keys, values, z):
-    """(T, 6) means of a module stepped over x from a zero state, its own mean fed back."""
+def _stepped(module, x, keys, values, z, read=False):
+    """(T, 6) means of a module stepped over x from a zero state, its own mean fed back (by `step_read`,
+    as a wrapping file steps its inner file, with `read`)."""
     H = int(module.hidden_size)
     h, c, y = torch.zeros(H), torch.zeros(H), torch.zeros(6)
     out = []
     with torch.no_grad():
         for xt in torch.from_numpy(np.ascontiguousarray(x, np.float32)):
-            y, _, h, c, _ = module.step(xt, y, h, c, keys, values, z)
+            if read:
+                y, _, h, c, _, _, _ = module.step_read(xt, y, h, c, keys, values, z)
+            else:
+                y, _, h, c, _ = module.step(xt, y, h, c, keys, values, z)
             out.append(y.numpy().astype(np.float64))
     return np.array(out)
 
@@ -166,3 +170,78 @@ def test_the_ridge_is_used_only_for_a_person_it_reads_better(tmp_path):
         assert b_used == (b_fitted if used else 0.0)
         if not used:
             np.testing.assert_allclose(_stepped(blend, target, keys, values, z), alone, atol=1e-6)
+
+
+def _numpy_switch_figures(inner, pieces, window, lam, folds, rows):
+    """(ridge_cv, cchp_cv) as the module docstring defines them, written out: clip b in fold b mod F; the
+    ridge fitted on the other folds' clips reads every clip of the fold; the CCHP, with the other folds'
+    clips as context, is stepped through the fold's clips among the `rows` spread over the context
+    (round(linspace(0, n - 1, rows))); each a share of zero twist's squared error over the steps read."""
+    picked = sorted({int(b) for b in np.round(np.linspace(0, len(pieces) - 1, min(rows, len(pieces))))})
+    sums = np.zeros((2, 2))  # (ridge, cchp) x (error, zero)
+    for f in range(min(folds, len(pieces))):
+        inside = [p for b, p in enumerate(pieces) if b % folds != f]
+        ridge = RidgeReference(window, lam).fit(inside)
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(inside))
+        keys, values, z, _ = inner.encode_context(x_c, y_c, mask)
+        for b, (x, y) in enumerate(pieces):
+            if b % folds != f:
+                continue
+            sums[0] += [((ridge.predict(x) - y) ** 2).sum(), (y.astype(np.float64) ** 2).sum()]
+            if b in picked:
+                sums[1] += [((_stepped(inner, x, keys, values, z) - y) ** 2).sum(), (y.astype(np.float64) ** 2).sum()]
+    return sums[0, 0] / sums[0, 1], sums[1, 0] / sums[1, 1]
+
+
+def _unlinear_person(rng, n_clips=8, steps=30):
+    """Clips whose labels no linear map of the features gives: the sign of a product of two features."""
+    pieces = []
+    for _ in range(n_clips):
+        x = rng.normal(scale=0.3, size=(steps, FEATURE_DIM))
+        y = np.zeros((steps, 6))
+        y[:, 0] = 0.5 * np.sign(x[:, 0] * x[:, 1])
+        y[:, 5] = 0.8 * np.sign(x[:, 2] * x[:, 3])
+        pieces.append((x.astype(np.float32), y.astype(np.float32)))
+    return pieces
+
+
+def test_the_switch_gives_a_person_the_ridge_or_the_inner_file_whole_by_its_definition(tmp_path):
+    """`--switch-below T --switch-ratio R`: the ridge alone (B = 1) for a person whose clips it reads, by
+    folds, under T of zero twist's squared error and under R times the inner file's (each checked against
+    its definition written out in numpy); else the inner file alone, exactly, and the inner file is not
+    stepped at all where the ridge's own figure is over T."""
+    rng = np.random.default_rng(3)
+    inner = load_policy(CORE)
+    linear, unlinear = _linear_person(rng, n_clips=8), _unlinear_person(rng)
+    ridge_cv, cchp_cv = _numpy_switch_figures(inner, linear, 3, 5.0, 3, 4)
+    assert ridge_cv < 0.05 and cchp_cv > 0.5  # a linear person: the ridge reads their clips far better
+    target, _ = _linear_person(rng, n_clips=1)[0]
+    cases = ((linear, dict(switch_below=0.1, switch_ratio=0.9), 1.0),
+             (linear, dict(switch_below=ridge_cv * 0.9, switch_ratio=0.9), 0.0),  # over T
+             (linear, dict(switch_below=0.1, switch_ratio=ridge_cv / cchp_cv * 0.9), 0.0),  # over R x cchp_cv
+             (unlinear, dict(switch_below=0.1, switch_ratio=0.9), 0.0))
+    for i, (person, switch, used) in enumerate(cases):
+        module = load_policy(rbp.build_ridge_blend_policy(CORE, tmp_path / f"s{i}.pt", window=3, lam=5.0, folds=3,
+                                                          rows=4, **switch))
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(person))
+        keys, values, z, _ = module.encode_context(x_c, y_c, mask)
+        b_used, b_fitted, _ = (float(v) for v in module.blend_choice(keys))
+        figures = [float(v) for v in module.switch_figures(keys)]
+        assert b_used == b_fitted == used
+        if person is linear:
+            assert figures[0] == pytest.approx(ridge_cv, rel=1e-6)
+            if figures[0] < switch["switch_below"]:
+                assert figures[1] == pytest.approx(cchp_cv, rel=2e-3)
+            else:
+                assert figures[1] == -1.0
+        else:
+            assert figures[0] > 0.5 and figures[1] == -1.0  # the ridge cannot read them: the inner file not stepped
+        inner_keys, inner_values, inner_z, _ = inner.encode_context(x_c, y_c, mask)
+        stepped = _stepped(module, target, keys, values, z)
+        if used:
+            expected = RidgeReference(3, 5.0).fit(person).predict(target)
+            np.testing.assert_allclose(stepped, expected, atol=1e-4)
+        else:
+            assert np.array_equal(stepped, _stepped(inner, target, inner_keys, inner_values, inner_z, read=True))
+    with pytest.raises(Exception, match="switch_below"):
+        rbp.build_ridge_blend_policy(CORE, tmp_path / "bad.pt", switch_below=1.5)

@@ -2,6 +2,7 @@
 
     python -m rtcohand_drake.learning.ridge_blend_policy --policy CCHP.pt --out FILE.pt
         [--window 10] [--lambda 100] [--folds 4] [--rows 12] [--min-gain G] [--lead L]
+        [--switch-below T --switch-ratio R]
 
 Some people are read best by a linear map of their own recent hand motion: their gestures are
 steady and their map from gesture to command is unlike anything the CCHP learned from other
@@ -22,6 +23,13 @@ With a context of one clip B is 0 (the CCHP alone). With `--min-gain G` the ridg
 person whose clips the blend reads with at least G less squared error than the inner file alone,
 cross-fitted (`export.blend_and_gain`); for anyone else B = 0 (`blend_choice` gives B, the fitted B
 and that share).
+
+With `--switch-below T` the file switches instead of blending: B is 1 (the ridge alone) for a person
+whose clips the ridge reads, by the same folds, with less than T of commanding zero twist's squared
+error (`ridge_cv`) and less than R times the inner file's error read the same way (`cchp_cv`: the inner
+file stepped through at most `rows` clips spread over the context, each with the other folds' clips
+as context); else B is 0 (the inner file alone, exactly). `cchp_cv` is stepped only for a person whose
+`ridge_cv` is under T (`switch_figures` gives both, -1 where not computed).
 
 The CCHP is fed its own mean, carried in h after its state; then the last `window` - 1 steps of
 the input. `std`, the read variance and the attention are the CCHP's.
@@ -62,13 +70,17 @@ class RidgeBlendPolicy(WrappedPolicySteps):
     """The exported CCHP policy blended, per person, with a ridge read of their own clips."""
 
     def __init__(self, inner: torch.jit.ScriptModule, window: int = DEFAULT_WINDOW, lam: float = DEFAULT_LAMBDA,
-                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS, min_gain: float = 0.0, lead: int = 0):
+                 folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS, min_gain: float = 0.0, lead: int = 0,
+                 switch_below: float = 0.0, switch_ratio: float = 1.0):
         super().__init__()
         if int(inner.feature_dim) < FEATURE_DIM or not hasattr(inner, "step_read"):
             raise InputError("the inner policy must read the 36 hand features first and have step_read")
         if not (window >= 1 and lam > 0 and folds >= 0 and rows >= 1 and 0.0 <= min_gain < 1.0 and lead >= 0):
             raise InputError(f"window must be >= 1, lambda positive, folds >= 0, rows >= 1, min_gain in [0, 1) and "
                              f"lead >= 0; got {window}, {lam}, {folds}, {rows}, {min_gain}, {lead}")
+        if not (0.0 <= switch_below < 1.0 and switch_ratio > 0.0) or (switch_below > 0.0 and folds < 2):
+            raise InputError(f"switch_below must be in [0, 1), switch_ratio positive and folds >= 2 for a switch; "
+                             f"got {switch_below}, {switch_ratio}, {folds}")
         self.inner = inner
         self.inner_hidden = int(inner.hidden_size)
         # The inner file reads every feature; the ridge reads the first 36, the hand-part velocities.
@@ -91,8 +103,13 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         # clip's last label held past its end): 0, the label as recorded; a CCHP trained to lead the handler's
         # lag reads labels `label_lead` steps on.
         self.label_lead = int(lead)
-        # Extras: the standardisation's mean and spread, W, mean(Y), B used, B as fitted and its gain.
-        self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 3
+        # A switch in place of the blend (0: off): the ridge alone for a person whose clips it reads, by folds,
+        # under this share of zero twist's error and under `switch_ratio` times the inner file's.
+        self.switch_below = float(switch_below)
+        self.switch_ratio = float(switch_ratio)
+        # Extras: the standardisation's mean and spread, W, mean(Y), B used, B as fitted and its gain, then the
+        # switch's ridge_cv and cchp_cv.
+        self.extra_size = 2 * self.ridge_dim + 6 * self.ridge_dim + 6 + 3 + 2
 
     def _columns(self, k: int) -> int:
         return (self.extra_size + k - 1) // k
@@ -154,7 +171,16 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         blend = torch.zeros(1, dtype=torch.float64)
         fitted = torch.zeros(1, dtype=torch.float64)
         gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
-        if self.blend_folds > 0 and n_rows > 1:
+        cv = torch.full((2,), -1.0, dtype=torch.float64)  # the switch's ridge_cv and cchp_cv; -1: not computed
+        if self.switch_below > 0.0 and n_rows > 1:
+            cv[0] = self._ridge_cv(x_c, y_c, m)
+            if float(cv[0]) < self.switch_below:
+                cv[1] = self._inner_cv(x_c, y_c, m)
+                if float(cv[0]) < self.switch_ratio * float(cv[1]):
+                    blend = torch.ones(1, dtype=torch.float64)
+                fitted = blend.clone()
+                gain = (1.0 - cv[0] / torch.clamp(cv[1], min=1e-12)).view(1)
+        elif self.blend_folds > 0 and n_rows > 1:
             fitted_b, gain_b = self._cross_validated_blend(x_c, y_c, m)
             fitted, gain = fitted_b.view(1), gain_b.view(1)
             blend = fitted if float(gain_b) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
@@ -165,8 +191,71 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         flat = torch.zeros(k * (d_in + self._columns(k)), dtype=keys_in.dtype)
         flat[:k * d_in] = keys_in.reshape(-1)
         flat[k * d_in:k * d_in + self.extra_size] = torch.cat([mean, spread, w.reshape(-1), y_mean, blend, fitted,
-                                                               gain]).to(keys_in.dtype)
+                                                               gain, cv]).to(keys_in.dtype)
         return flat.view(k, d_in + self._columns(k)), values, z_mu, z_sigma
+
+    def _fold(self, n_rows: int, folds: int, f: int) -> Tuple[List[int], List[int]]:
+        """(the clips of fold f, the others): clip b is in fold b mod folds."""
+        out_rows: List[int] = []
+        in_rows: List[int] = []
+        for b in range(n_rows):
+            if b % folds == f:
+                out_rows.append(b)
+            else:
+                in_rows.append(b)
+        return out_rows, in_rows
+
+    def _ridge_cv(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> float:
+        """The ridge's squared error over the person's clips, each read with the ridge fitted on the other
+        folds' clips (clip b in fold b mod folds), as a share of zero twist's over the same steps."""
+        n_rows = x_c.size(0)
+        folds = min(self.blend_folds, n_rows)
+        err = 0.0
+        zero = 0.0
+        for f in range(folds):
+            out_rows, in_rows = self._fold(n_rows, folds, f)
+            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, in_rows))
+            x, y = self._rows(x_c, y_c, m, out_rows)
+            err += float(((torch.mm((x - mean) / spread, w) + y_mean - y) ** 2).sum())
+            zero += float((y * y).sum())
+        return err / zero if zero > 0.0 else float("inf")
+
+    def _inner_cv(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> float:
+        """The inner file's squared error over at most `rows` of the person's clips spread over the context,
+        each stepped from a zero state (its own mean fed back, z the prior mean) with the other folds' clips
+        as context, as a share of zero twist's over the same steps."""
+        n_rows = x_c.size(0)
+        folds = min(self.blend_folds, n_rows)
+        picked = torch.unique(torch.round(torch.linspace(0.0, float(n_rows - 1), min(self.blend_rows, n_rows),
+                                                         dtype=torch.float64)).to(torch.long))
+        picked_rows: List[int] = picked.tolist()
+        hi = self.inner_hidden
+        err = 0.0
+        zero = 0.0
+        for f in range(folds):
+            in_rows = self._fold(n_rows, folds, f)[1]
+            out_rows: List[int] = []
+            for b in picked_rows:
+                if b % folds == f:
+                    out_rows.append(b)
+            if len(out_rows) == 0 or len(in_rows) == 0:
+                continue
+            keep = torch.tensor(in_rows)
+            keys, values, z, _ = self.inner.encode_context(x_c[keep], y_c[keep], m[keep])
+            for b in out_rows:
+                n = int(m[b].sum())
+                y = torch.nan_to_num(lead_labels(y_c[b:b + 1], m[b:b + 1], self.label_lead)[0, :n].to(torch.float64),
+                                     0.0, 0.0, 0.0)
+                h = torch.zeros(hi)
+                c = torch.zeros(hi)
+                y_prev = torch.zeros(6)
+                for t in range(n):
+                    y_prev, _, h, c, _, _, _ = self.inner.step_read(
+                        torch.nan_to_num(x_c[b, t], 0.0, 0.0, 0.0), y_prev, h, c, keys, values, z)
+                    miss = y[t] - y_prev.to(torch.float64)
+                    err += float((miss * miss).sum())
+                    zero += float((y[t] * y[t]).sum())
+        return err / zero if zero > 0.0 else float("inf")
 
     def _cross_validated_blend(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor
                                ) -> Tuple[torch.Tensor, torch.Tensor]:
@@ -177,13 +266,7 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         hi = self.inner_hidden
         sums = torch.zeros(n_rows, 3, dtype=torch.float64)  # per clip: gap . miss, |gap|^2, |miss|^2
         for f in range(folds):
-            out_rows: List[int] = []
-            in_rows: List[int] = []
-            for b in range(n_rows):
-                if b % folds == f:
-                    out_rows.append(b)
-                else:
-                    in_rows.append(b)
+            out_rows, in_rows = self._fold(n_rows, folds, f)
             mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, in_rows))
             keep = torch.tensor(in_rows)
             keys, values, z, _ = self.inner.encode_context(x_c[keep], y_c[keep], m[keep])
@@ -220,6 +303,11 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         return self._extras(keys)[8 * self.ridge_dim + 6:8 * self.ridge_dim + 9]
 
     @torch.jit.export
+    def switch_figures(self, keys: torch.Tensor) -> torch.Tensor:
+        """[ridge_cv, cchp_cv] of a switch (module docstring) for encoded keys; -1 where not computed."""
+        return self._extras(keys)[8 * self.ridge_dim + 9:8 * self.ridge_dim + 11]
+
+    @torch.jit.export
     def attention_of(self, query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
         """The CCHP's attention over the K context steps."""
         return self.inner.attention_of(query, self._inner_keys(keys))
@@ -240,8 +328,12 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         xs = (window - extras[:d]) / extras[d:2 * d]
         ridge = torch.mv(extras[2 * d:8 * d].view(d, 6).t(), xs) + extras[8 * d:8 * d + 6]
         b = extras[8 * d + 6]
-        mean = b * ridge + (1.0 - b) * mean_i
-        read = (b * ridge + (1.0 - b) * read_i.mean(0)).view(1, 6)
+        if float(b) == 0.0:  # the inner file alone, exactly
+            mean = mean_i
+            read = read_i.mean(0).view(1, 6)
+        else:
+            mean = b * ridge + (1.0 - b) * mean_i
+            read = (b * ridge + (1.0 - b) * read_i.mean(0)).view(1, 6)
         h_next = torch.cat([h2, mean_i, window[self.motion_feature_dim:]])
         c_next = torch.cat([c2, torch.zeros(6 + (self.window - 1) * self.motion_feature_dim)])
         return mean, std, h_next, c_next, read, v, query
@@ -249,7 +341,8 @@ class RidgeBlendPolicy(WrappedPolicySteps):
 
 def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int = DEFAULT_WINDOW,
                              lam: float = DEFAULT_LAMBDA, folds: int = DEFAULT_FOLDS, rows: int = DEFAULT_ROWS,
-                             min_gain: float = 0.0, lead: int = 0) -> pathlib.Path:
+                             min_gain: float = 0.0, lead: int = 0, switch_below: float = 0.0,
+                             switch_ratio: float = 1.0) -> pathlib.Path:
     """Writes the blended policy file, its model card extended with the ridge read's settings."""
     from rtcohand_drake.learning.export import policy_and_card, save_scripted
 
@@ -258,12 +351,16 @@ def build_ridge_blend_policy(policy: os.PathLike, out: os.PathLike, window: int 
         raise InputError(f"{policy}: already blends a ridge read; give the CCHP policy it was built from")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.jit")
-        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows, min_gain, lead).eval())
+        scripted = torch.jit.script(RidgeBlendPolicy(inner, window, lam, folds, rows, min_gain, lead, switch_below,
+                                                     switch_ratio).eval())
     card = dict(card, ridge_read={
         "inner_policy": pathlib.Path(policy).name, "window": window, "lambda": lam, "blend_folds": folds,
         "blend_rows": rows, "min_gain": min_gain, **({"lead": lead} if lead > 0 else {}),
-        "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; "
-                "blended with the CCHP by B chosen per person by folds of their clips"})
+        **({"switch_below": switch_below, "switch_ratio": switch_ratio} if switch_below > 0 else {}),
+        "read": "ridge on the last `window` steps of the 36 hand-part velocities, fitted to the person's clips; " +
+                ("the ridge alone for a person whose clips it reads, by folds, under `switch_below` of zero twist's "
+                 "error and under `switch_ratio` times the CCHP's; else the CCHP alone" if switch_below > 0 else
+                 "blended with the CCHP by B chosen per person by folds of their clips")})
     return save_scripted(scripted, out, card)
 
 
@@ -283,13 +380,18 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--lead", type=int, default=0,
                    help="fit the ridge to, and choose the blend on, each step's label this many steps on (0: the "
                         "label as recorded; the shipped CCHP is trained 2 steps on)")
+    p.add_argument("--switch-below", type=float, default=0.0,
+                   help="switch instead of blending: the ridge alone for a person whose clips it reads, by the folds, "
+                        "under this share of zero twist's squared error and under --switch-ratio times the inner "
+                        "file's; else the inner file alone (0: blend)")
+    p.add_argument("--switch-ratio", type=float, default=1.0, help="see --switch-below (default 1)")
     return p
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     out = build_ridge_blend_policy(args.policy, args.out, args.window, args.lam, args.folds, args.rows, args.min_gain,
-                                   args.lead)
+                                   args.lead, args.switch_below, args.switch_ratio)
     print(f"wrote {out}")
     return 0
 
