@@ -52,6 +52,10 @@ def main(argv=None) -> int:
     p.add_argument("--users", nargs="+", default=["u10", "u11", "u12", "u13", "u14"])
     p.add_argument("--correction-weight", type=float, default=None, help="default: the scenario's")
     p.add_argument("--intent", action="store_true", help="the intent reference in the policy's place")
+    p.add_argument("--direct-share", type=float, default=None,
+                   help="draw the populations with this share of direct users (data.generate --direct-share)")
+    p.add_argument("--repeated-rhythm-share", type=float, default=None,
+                   help="draw the populations with this share of repeated rhythm (data.generate --repeated-rhythm-share)")
     p.add_argument("--workers", type=int, default=2, help="local Dask cluster worker processes (0: in this process)")
     p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
     p.add_argument("--out", type=Path, default=REPO / "out" / "closed_loop_read")
@@ -83,8 +87,17 @@ def main(argv=None) -> int:
         return (f"p{r.population_seed}/{r.user}: completion {r.completion_s}, lag {r.lag_s * 1e3:.0f} ms, gains "
                 + " ".join(f"{a} {g:+.2f}" for a, g in zip(AXES, r.gains) if np.isfinite(g)))
 
-    tasks = [((population, user), (scenario, user, population, args.run_seed, 0.3 if args.intent else None))
-             for population in args.population_seeds for user in args.users]
+    from dataclasses import replace
+
+    from rtcohand_drake.data.population import GeneratorConfig
+
+    generator = GeneratorConfig()
+    if args.direct_share is not None:
+        generator = replace(generator, p_direct=args.direct_share)
+    if args.repeated_rhythm_share is not None:
+        generator = replace(generator, p_repeated_rhythm=args.repeated_rhythm_share)
+    tasks = [((population, user), (scenario, user, population, args.run_seed, 0.3 if args.intent else None, None,
+                                   generator)) for population in args.population_seeds for user in args.users]
     report = run_tasks(measure_person, tasks, workers=args.workers, address=args.address, label="closed loop",
                        describe=describe)
     if report.failed:
@@ -93,7 +106,9 @@ def main(argv=None) -> int:
         return 1
     rows = [o.value for o in report.outcomes]
     what = f"{'intent reference' if args.intent else f'policy {scenario.policy.model}'}, run seed {args.run_seed}"
-    return _report(args, rows, what, {"model": scenario.policy.model, "intent": args.intent, "run_seed": args.run_seed})
+    return _report(args, rows, what, {"model": scenario.policy.model, "intent": args.intent, "run_seed": args.run_seed,
+                                      "direct_share": generator.p_direct,
+                                      "repeated_rhythm_share": generator.p_repeated_rhythm})
 
 
 def _report(args, rows, what: str, header: dict) -> int:

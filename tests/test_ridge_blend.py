@@ -245,3 +245,57 @@ def test_the_switch_gives_a_person_the_ridge_or_the_inner_file_whole_by_its_defi
             assert np.array_equal(stepped, _stepped(inner, target, inner_keys, inner_values, inner_z, read=True))
     with pytest.raises(Exception, match="switch_below"):
         rbp.build_ridge_blend_policy(CORE, tmp_path / "bad.pt", switch_below=1.5)
+
+
+def test_the_kernel_read_over_the_switch_gives_a_linear_person_the_ridge_and_a_path_and_shape_person_the_kernel_read(
+        tmp_path):
+    """The default file's kernel read of the path and shape built over the ridge switch over the shipped CCHP
+    (`path_shape_policy --policy SWITCH.pt`; docs/policy.md: reported once, not shipped), on people the test
+    writes: a person whose commands are a linear map of their last second of motion gets the ridge alone,
+    reading their held-out clips as the ridge fitted to them does and far better than the CCHP; a
+    fast-turning person whom only the path and shape tell is read, step for step, as by the kernel-read
+    file over the CCHP alone (the switch leaves the CCHP; to float32 rounding), and gets the kernel read."""
+    from rtcohand_drake.data.hand_features import PATH_SHAPE_DIM
+    from rtcohand_drake.learning.path_shape_policy import FAST_TURN_RAD_S, build_path_shape_policy
+
+    switch = rbp.build_ridge_blend_policy(CORE, tmp_path / "switch.pt", switch_below=0.1, switch_ratio=0.9)
+    one, core = load_policy(build_path_shape_policy(switch, tmp_path / "one.pt")), load_policy(CORE)
+    rng = np.random.default_rng(4)
+    person = []  # a direct person: each command 0.5 x the palm's motion on its axis now
+    for _ in range(16):
+        x = rng.normal(scale=0.3, size=(100, FEATURE_DIM)).astype(np.float32)
+        person.append((x, (0.5 * x[:, :6]).astype(np.float32)))
+    context, held_out = person[:12], person[12:]
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z, _ = one.encode_context(x_c, y_c, mask)  # the 36 features alone: the inner read
+    switch_keys = one._inner_keys(keys)
+    assert float(one.inner.blend_choice(switch_keys)[0]) == 1.0 and float(one.blend_choice(keys)[0]) == 0.0
+    core_keys, core_values, core_z, _ = core.encode_context(x_c, y_c, mask)
+    ridge = RidgeReference(10, 100.0).fit(context)
+    errors = {"file": 0.0, "ridge": 0.0, "cchp": 0.0}
+    for x, y in held_out:
+        read = _stepped(one, x, keys, values, z)
+        np.testing.assert_allclose(read, ridge.predict(x), atol=1e-4)
+        errors["file"] += float(((read - y) ** 2).sum())
+        errors["ridge"] += float(((ridge.predict(x) - y) ** 2).sum())
+        errors["cchp"] += float(((_stepped(core, x, core_keys, core_values, core_z) - y) ** 2).sum())
+    assert errors["file"] <= 1.01 * errors["ridge"] and errors["file"] < 0.2 * errors["cchp"]
+
+    # A fast-turning person whose commands only the hand's path and shape tell.
+    def pieces(lengths):
+        out = []
+        for n in lengths:
+            x = np.hstack([rng.normal(scale=0.3, size=(n, FEATURE_DIM)), rng.normal(scale=0.05, size=(n, PATH_SHAPE_DIM))])
+            x[:, 3:6] = rng.uniform(-2.0 * FAST_TURN_RAD_S, 2.0 * FAST_TURN_RAD_S, (n, 3))  # the palm turns fast
+            out.append((x.astype(np.float32), (np.tanh(x[:, FEATURE_DIM:FEATURE_DIM + 6] * 10.0) * 0.3).astype(np.float32)))
+        return out
+    context, target = pieces([30, 25, 28, 26, 22, 27]), pieces([20])[0][0]
+    x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+    keys, values, z, _ = one.encode_context(x_c, y_c, mask)
+    assert float(one.blend_choice(keys)[0]) > 0.0  # the kernel read
+    assert float(one.inner.switch_figures(one._inner_keys(keys))[0]) > 0.5  # the ridge cannot read them
+    kernel_file = load_policy(build_path_shape_policy(CORE, tmp_path / "kernel.pt"))
+    kernel_keys, kernel_values, kernel_z, _ = kernel_file.encode_context(x_c, y_c, mask)
+    assert torch.equal(kernel_file.blend_choice(kernel_keys), one.blend_choice(keys))
+    np.testing.assert_allclose(_stepped(one, target, keys, values, z, read=True),
+                               _stepped(kernel_file, target, kernel_keys, kernel_values, kernel_z, read=True), atol=1e-6)

@@ -240,3 +240,18 @@ def test_intent_reference_run_stops_a_hold_after_the_sixth_face():
     assert log.completed and log.faces_inspected == 6
     assert abs(log.extra_attrs["sim_duration_s"] - log.completion_time - scenario.done_hold_s) <= 0.05
     assert log.extra_attrs["seed"] == 0
+
+
+def test_the_builtin_person_comes_from_a_population_drawn_with_other_settings(scenario):
+    """`make_builtin_person(..., generator=...)`: the person and context of a population drawn with other
+    generator settings (as `data.generate --direct-share 1 --repeated-rhythm-share 0` draws it), which
+    the closed-loop benchmark's `--direct-share` runs; the default population's person is unchanged."""
+    direct = replace(GeneratorConfig(), p_direct=1.0, p_repeated_rhythm=0.0)
+    person, pieces = make_builtin_person(scenario, user="u10", population_seed=0, generator=direct)
+    profile, clips, _ = simulate_user(direct, 10, user_groups(15, direct)[10], 0)
+    pc = to_policy_clip(clips[3], scenario.policy.rate_hz)
+    np.testing.assert_array_equal(pieces[3][0], pc.features)
+    np.testing.assert_array_equal(pieces[3][1], pc.labels)
+    assert person.generator is direct and person.user.user_id == profile.user_id == "u10"
+    _, default_pieces = make_builtin_person(scenario, user="u10", population_seed=0)
+    assert not np.array_equal(default_pieces[3][1], pieces[3][1]) or not np.array_equal(default_pieces[3][0], pieces[3][0])

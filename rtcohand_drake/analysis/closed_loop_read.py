@@ -99,18 +99,19 @@ def still_figures(intent: np.ndarray, command: np.ndarray, period_s: float, stil
 
 
 def measure_person(scenario, user: str, population_seed: int, seed: int = 0, intent_delay_s: float | None = None,
-                   duration_s: float | None = None) -> ClosedLoopRead:
+                   duration_s: float | None = None, generator=None) -> ClosedLoopRead:
     """`measure` as one task of a sweep (`analysis.engine.run_tasks`): the intent reference with
     `intent_delay_s`, else the scenario's policy; only picklable arguments."""
     from rtcohand_drake.analysis.reference_policies import IntentPolicy
 
     policy = None if intent_delay_s is None else IntentPolicy(scenario.policy.rate_hz, intent_delay_s)
-    return measure(scenario, user, population_seed, seed, policy=policy, duration_s=duration_s)
+    return measure(scenario, user, population_seed, seed, policy=policy, duration_s=duration_s, generator=generator)
 
 
 def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=None,
-            duration_s: float | None = None, max_lag: int = 8) -> ClosedLoopRead:
-    """The inspection for the built-in person `user` of population `population_seed`, with `policy`
+            duration_s: float | None = None, max_lag: int = 8, generator=None) -> ClosedLoopRead:
+    """The inspection for the built-in person `user` of population `population_seed` (drawn with the
+    `data.population.GeneratorConfig` `generator`; default the generator's defaults), with `policy`
     (default: the scenario's CCHP policy with that person's clips as context), until the scenario's
     hold after the sixth face or `duration_s` (default: the scenario's cap)."""
     from pydrake.systems.analysis import Simulator
@@ -125,7 +126,7 @@ def measure(scenario, user: str, population_seed: int, seed: int = 0, policy=Non
 
     model = models_dir() / scenario.policy.model
     source, pieces = make_builtin_person(scenario, seed=seed, user=user, population_seed=population_seed,
-                                         path_shape=policy is None and reads_path_shape(model))
+                                         path_shape=policy is None and reads_path_shape(model), generator=generator)
     rate = scenario.policy.rate_hz
     if policy is None:
         policy = CchpPolicy.from_scenario(model, pieces, scenario.policy, seed=seed)

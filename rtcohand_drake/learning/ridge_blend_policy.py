@@ -144,16 +144,29 @@ class RidgeBlendPolicy(WrappedPolicySteps):
             ys.append(torch.nan_to_num(y.to(torch.float64), 0.0, 0.0, 0.0))
         return torch.cat(xs), torch.cat(ys)
 
+    def _stats(self, x: torch.Tensor, y: torch.Tensor) -> List[torch.Tensor]:
+        """The sums a ridge is fitted from, for rows x (N, ridge_dim), y (N, 6): [N, sum x, X^T X, X^T Y, sum y];
+        the sums of two sets of rows are the sums of their rows together."""
+        n = torch.full((1,), float(x.size(0)), dtype=torch.float64)
+        return [n, x.sum(0), torch.mm(x.t(), x), torch.mm(x.t(), y), y.sum(0)]
+
+    def _fit_stats(self, stats: List[torch.Tensor]) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(mean, spread, W, mean(Y)) of the ridge on the rows whose sums are `stats` (`_stats`): the rows
+        standardised by their own mean and spread, W = (Xs^T Xs + lambda I)^-1 Xs^T (Y - mean(Y))."""
+        n = stats[0]
+        mean = stats[1] / n
+        y_mean = stats[4] / n
+        # Xs^T Xs = S^-1 (X^T X - n mean mean^T) S^-1 and Xs^T (Y - mean(Y)) = S^-1 (X^T Y - n mean mean(Y)^T).
+        centred = stats[2] - n * torch.outer(mean, mean)
+        spread = torch.clamp(torch.sqrt(torch.clamp(torch.diagonal(centred) / n, min=0.0)), min=1e-6)
+        a = centred / torch.outer(spread, spread) + self.ridge_lambda * torch.eye(self.ridge_dim, dtype=torch.float64)
+        w = torch.linalg.solve(a, (stats[3] - n * torch.outer(mean, y_mean)) / spread.view(-1, 1))
+        return mean, spread, w, y_mean
+
     def _fit(self, x: torch.Tensor, y: torch.Tensor
              ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """(mean, spread, W, mean(Y)) of the ridge on rows x (N, ridge_dim), y (N, 6)."""
-        mean = x.mean(0)
-        spread = torch.clamp(x.std(0, unbiased=False), min=1e-6)
-        xs = (x - mean) / spread
-        y_mean = y.mean(0)
-        a = torch.mm(xs.t(), xs) + self.ridge_lambda * torch.eye(self.ridge_dim, dtype=torch.float64)
-        w = torch.linalg.solve(a, torch.mm(xs.t(), y - y_mean))
-        return mean, spread, w, y_mean
+        return self._fit_stats(self._stats(x, y))
 
     @torch.jit.export
     def encode_context(self, x_c: torch.Tensor, y_c: torch.Tensor, mask: torch.Tensor
@@ -165,15 +178,20 @@ class RidgeBlendPolicy(WrappedPolicySteps):
             raise RuntimeError("encode_context: y_c must be (B, T, 6) and mask (B, T), as x_c")
         keys_in, values, z_mu, z_sigma = self.inner.encode_context(x_c, y_c, m)
         n_rows = x_c.size(0)
-        # A clip's steps are its first mask.sum() steps (the context is packed that way, pack_context).
-        x, y = self._rows(x_c, y_c, m, list(range(n_rows)))
-        mean, spread, w, y_mean = self._fit(x, y)
         blend = torch.zeros(1, dtype=torch.float64)
         fitted = torch.zeros(1, dtype=torch.float64)
         gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
         cv = torch.full((2,), -1.0, dtype=torch.float64)  # the switch's ridge_cv and cchp_cv; -1: not computed
-        if self.switch_below > 0.0 and n_rows > 1:
-            cv[0] = self._ridge_cv(x_c, y_c, m)
+        switch = self.switch_below > 0.0 and n_rows > 1
+        if switch:
+            # The folds' sums add up to the whole context's: the ridge read is fitted from them.
+            ridge_cv, total = self._ridge_cv(x_c, y_c, m)
+            mean, spread, w, y_mean = self._fit_stats(total)
+            cv[0] = ridge_cv
+        else:
+            # A clip's steps are its first mask.sum() steps (the context is packed that way, pack_context).
+            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, list(range(n_rows))))
+        if switch:
             if float(cv[0]) < self.switch_below:
                 cv[1] = self._inner_cv(x_c, y_c, m)
                 if float(cv[0]) < self.switch_ratio * float(cv[1]):
@@ -205,20 +223,36 @@ class RidgeBlendPolicy(WrappedPolicySteps):
                 in_rows.append(b)
         return out_rows, in_rows
 
-    def _ridge_cv(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> float:
-        """The ridge's squared error over the person's clips, each read with the ridge fitted on the other
-        folds' clips (clip b in fold b mod folds), as a share of zero twist's over the same steps."""
+    def _ridge_cv(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> Tuple[float, List[torch.Tensor]]:
+        """(The ridge's squared error over the person's clips, each read with the ridge fitted on the other
+        folds' clips (clip b in fold b mod folds), as a share of zero twist's over the same steps; the whole
+        context's sums, `_stats`). Each fold's rows are windowed and summed once; a fit on the other folds
+        takes the total less its own."""
         n_rows = x_c.size(0)
         folds = min(self.blend_folds, n_rows)
+        held: List[Tuple[torch.Tensor, torch.Tensor]] = []
+        sums: List[List[torch.Tensor]] = []
+        for f in range(folds):
+            x, y = self._rows(x_c, y_c, m, self._fold(n_rows, folds, f)[0])
+            held.append((x, y))
+            sums.append(self._stats(x, y))
+        total: List[torch.Tensor] = []
+        for i in range(5):
+            part = sums[0][i]
+            for f in range(1, folds):
+                part = part + sums[f][i]
+            total.append(part)
         err = 0.0
         zero = 0.0
         for f in range(folds):
-            out_rows, in_rows = self._fold(n_rows, folds, f)
-            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, in_rows))
-            x, y = self._rows(x_c, y_c, m, out_rows)
+            rest: List[torch.Tensor] = []
+            for i in range(5):
+                rest.append(total[i] - sums[f][i])
+            mean, spread, w, y_mean = self._fit_stats(rest)
+            x, y = held[f]
             err += float(((torch.mm((x - mean) / spread, w) + y_mean - y) ** 2).sum())
             zero += float((y * y).sum())
-        return err / zero if zero > 0.0 else float("inf")
+        return (err / zero if zero > 0.0 else float("inf")), total
 
     def _inner_cv(self, x_c: torch.Tensor, y_c: torch.Tensor, m: torch.Tensor) -> float:
         """The inner file's squared error over at most `rows` of the person's clips spread over the context,

@@ -617,7 +617,7 @@ def population_user_ids(config: GeneratorConfig | None = None, n_users: int = DE
 
 def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
                           config: PersonConfig | None = None, population_seed: int = DEFAULT_SEED,
-                          path_shape: bool = False):
+                          path_shape: bool = False, generator: GeneratorConfig | None = None):
     """The built-in simulated person and its context: (SimulatedPerson, [(features (T, 36), labels (T, 6)), ...]);
     with `path_shape` the features are followed by the hand's path and shape (`to_policy_clip`).
 
@@ -627,12 +627,13 @@ def make_builtin_person(scenario, seed: int = 0, user: str | None = None,
     The context is that user's 72 labelled clips at the policy rate, generated
     here exactly as in that file. `population_seed` picks another population
     (as `data.generate --seed N` writes it): people other than the benchmark's,
-    to validate a design choice on.
+    to validate a design choice on; `generator` a population drawn with other
+    settings (as `data.generate --direct-share 1` writes it, say).
     """
     from rtcohand_drake.data.dataset import to_policy_clip
     from rtcohand_drake.cell.plant import eye_position
 
-    generator = GeneratorConfig()
+    generator = generator or GeneratorConfig()
     ids = population_user_ids(generator)
     if user is None:
         user = next(u for u, group in ids.items() if group == "out-sample")
