@@ -22,6 +22,8 @@ def _same_references(a: dict, b: dict) -> bool:
     for key in ("zero_twist_mse", "ridge_mse"):
         ra, rb = a["reference"].get(key, {}), b["reference"].get(key, {})
         shared = set(ra) & set(rb)
+        if key == "ridge_mse" and not ra and not rb:
+            continue  # results written before the ridge reference
         if not shared or any(abs(ra[s] - rb[s]) > 1e-12 * max(1.0, abs(ra[s])) for s in shared):
             return False
     return True
@@ -37,7 +39,7 @@ def merged_table(results: list[dict]) -> str:
             raise SystemExit(f"merge_results: the files differ in 'data': {first['data']} against {other['data']}, "
                              "and their zero-twist or ridge MSE differ")
     zero = first["reference"]["zero_twist_mse"]
-    ridge = first["reference"]["ridge_mse"]
+    ridge = first["reference"].get("ridge_mse")  # absent from results written before the ridge reference
     settings = [s for s in ALL_SETTINGS if s in zero]
     lines = ["| model | seeds | " + " | ".join(settings) + " |", "|---|---|" + "---|" * len(settings)]
     for result in results:
@@ -47,12 +49,32 @@ def merged_table(results: list[dict]) -> str:
                 r = model["settings"].get(s)
                 cells.append("-" if r is None else f"{r['mse']:.4f} ± {r['mse_std']:.4f} ({r['mse'] / zero[s]:.2f}x)")
             lines.append(f"| {name} | {model['seeds']} | " + " | ".join(cells) + " |")
-    lines.append("| ridge fitted to the context (reference) | - | " + " | ".join(
-        f"{ridge[s]:.4f} ({ridge[s] / zero[s]:.2f}x)" for s in settings) + " |")
+    if ridge:
+        lines.append("| ridge fitted to the context (reference) | - | " + " | ".join(
+            f"{ridge[s]:.4f} ({ridge[s] / zero[s]:.2f}x)" if s in ridge else "-" for s in settings) + " |")
     lines.append("| zero twist | - | " + " | ".join(f"{zero[s]:.4f}" for s in settings) + " |")
     lines += ["", "Episodes per setting: " + ", ".join(f"{s} {first['episodes'][s]}" for s in settings)]
     return "\n".join(lines)
 
 
+def main(argv: list[str]) -> int:
+    if not argv or any(a.startswith("-") for a in argv):
+        print("usage: python benchmarks/merge_results.py A/results.json B/results.json [...]", file=sys.stderr)
+        return 2
+    results = []
+    for path in argv:
+        try:
+            results.append(json.loads(pathlib.Path(path).read_text()))
+        except (OSError, ValueError) as err:
+            print(f"merge_results: {path}: not a readable results.json ({type(err).__name__})", file=sys.stderr)
+            return 2
+    try:
+        print(merged_table(results))
+    except (KeyError, TypeError, AttributeError) as err:
+        print(f"merge_results: not an evaluate results.json (no {err})", file=sys.stderr)
+        return 2
+    return 0
+
+
 if __name__ == "__main__":
-    print(merged_table([json.loads(pathlib.Path(p).read_text()) for p in sys.argv[1:]]))
+    sys.exit(main(sys.argv[1:]))

@@ -19,3 +19,22 @@ def test_the_same_episodes_at_another_path_merge(load_script):
 def test_other_episodes_at_another_path_are_refused(load_script):
     with pytest.raises(SystemExit, match="differ in 'data'"):
         load_script(SCRIPT).merged_table([_result("out/a.h5"), _result("out/b.h5", zero=0.021)])
+
+
+def test_no_files_a_missing_file_or_another_json_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    other = tmp_path / "other.json"
+    other.write_text('{"a": 1}')
+    for args in ([], [str(tmp_path / "none.json")], [str(other)]):
+        run = subprocess.run([sys.executable, SCRIPT] + args, capture_output=True, text=True)
+        assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
+
+
+def test_results_written_before_the_ridge_reference_merge_without_its_row(load_script):
+    old = [_result("out/a.h5", name="A"), _result("out/a.h5", name="B")]
+    for r in old:
+        del r["reference"]["ridge_mse"]
+    table = load_script(SCRIPT).merged_table(old)
+    assert "| A | 3 |" in table and "| B | 3 |" in table and "ridge" not in table
