@@ -72,7 +72,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.errors import ArgumentParser, InputError, non_negative_int, run_cli, writable_file_path
 
 DIMENSIONS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 ONE_MOTIONS = tuple(((d, s),) for d in range(6) for s in (1, -1))
@@ -355,20 +355,15 @@ def write_recording(path: Path, clips, protocol: Protocol, source: str, labels: 
 # --------------------------------------------------------------------------- command line
 
 
-class _ArgumentParser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(f"command line: {message}")
-
-
 def make_parser() -> argparse.ArgumentParser:
-    p = _ArgumentParser(prog="python -m rtcohand_drake.record", description=__doc__.split("\n")[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.record", description=__doc__.split("\n")[0])
     p.add_argument("--out", type=Path, required=True, help="the dataset file to write (HDF5)")
     p.add_argument("--user", required=True, help="the person's user id in the file")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--camera", type=int, help="OpenCV camera number")
+    src.add_argument("--camera", type=non_negative_int, help="OpenCV camera number")
     src.add_argument("--video", type=Path, help="a video of a session recorded to this protocol's timing")
     src.add_argument("--simulated-user", help="the built-in simulated person uXX")
-    p.add_argument("--population-seed", type=int, default=0, help="with --simulated-user: the population")
+    p.add_argument("--population-seed", type=non_negative_int, default=0, help="with --simulated-user: the population")
     p.add_argument("--camera-calibration", type=Path, default=None, help="see python -m rtcohand_drake.run")
     p.add_argument("--scenario", default="inspection", help="scenario with the camera settings")
     p.add_argument("--only", default=None, help="record only these motions, e.g. Tx+,Rz- (default: all)")
@@ -380,11 +375,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", type=Path, default=None,
                    help="the policy file the reading check reads the clips with (default: the scenario's "
                         "policy.model, or its policy.real_hand_model where one is named)")
-    p.add_argument("--seed", type=int, default=0, help="seeds the simulated person's responses")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seeds the simulated person's responses")
     p.add_argument("--labels", choices=("cue", "aruco"), default="cue",
                    help="cue: the cue's twist; aruco: a handler's ArUco-marked object (camera or video)")
     p.add_argument("--marker-length-m", type=float, default=0.05, help="with --labels aruco: the marker's side")
-    p.add_argument("--marker-id", type=int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
+    p.add_argument("--marker-id", type=non_negative_int, default=0, help="with --labels aruco: its id (DICT_4X4_50)")
     p.add_argument("--style", choices=STYLES, default="hold",
                    help="hold: keep the motion going while the part should move; stroke: one short stroke")
     p.add_argument("--verbose", action="store_true",
@@ -393,11 +388,27 @@ def make_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_before_recording(args) -> None:
+    """What would otherwise fail only after the session is recorded: where it is written, the user id it
+    is written under, the scenario, and the policy file the reading check reads it with."""
+    from rtcohand_drake.scenario import load_scenario
+
+    writable_file_path(args.out, "--out")
+    user = args.user
+    if not user or user != user.strip() or "/" in user or user in (".", ".."):
+        raise InputError(f"command line: --user {user!r}: give a non-empty id without '/' or surrounding spaces")
+    scenario = load_scenario(args.scenario)
+    if not args.no_check:
+        from rtcohand_drake.cell.robot_files import policy_file_path
+        from rtcohand_drake.learning.policy_file import load_policy
+
+        named = getattr(scenario.policy, "real_hand_model", "") or scenario.policy.model
+        load_policy(args.model if args.model is not None else policy_file_path(named))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
-    directory = args.out.parent if str(args.out.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"{args.out}: directory {directory} does not exist")
+    _check_before_recording(args)
     motions_list = session_motions(args.only, args.repeats)
     protocol = protocol_for(args.style)
     print(f"recording {len(motions_list)} clips for {args.user}: "
@@ -466,6 +477,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+def _source_flags(args) -> str:
+    """The flags of this session that a second one, recording some motions again, needs the same: the
+    source (a video names a new recording), its calibration and labels, the scenario, the cue's view."""
+    if args.simulated_user is not None:
+        flags = f" --simulated-user {args.simulated_user} --population-seed {args.population_seed} --seed {args.seed}"
+    elif args.camera is not None:
+        flags = f" --camera {args.camera}"
+    else:
+        flags = " --video NEW_VIDEO"
+    if args.camera_calibration is not None:
+        flags += f" --camera-calibration {args.camera_calibration}"
+    if args.labels != "cue":
+        flags += f" --labels {args.labels} --marker-length-m {args.marker_length_m:g} --marker-id {args.marker_id}"
+    if args.scenario != "inspection":
+        flags += f" --scenario {args.scenario}"
+    return flags + (" --no-meshcat" if args.no_meshcat else "")
+
+
 def again_hint(args, motions: Sequence[str], model: Sequence[str] = ()) -> str:
     """What to do about the motions the check read below half their size (or did not see): the
     command that records them again, and how to use both files as one context."""
@@ -474,7 +503,7 @@ def again_hint(args, motions: Sequence[str], model: Sequence[str] = ()) -> str:
     again = args.out.with_name(f"{args.out.stem}_again{args.out.suffix or '.h5'}")
     both = f"--context-file {args.out} {again} --context-user {args.user}"
     return (f"to record {', '.join(motions)} again: python -m rtcohand_drake.record --out {again} "
-            f"--user {args.user} --style {args.style} --only {','.join(motions)}"
+            f"--user {args.user}{_source_flags(args)} --style {args.style} --only {','.join(motions)}"
             + (f" --repeats {args.repeats}" if args.repeats != DEFAULT_REPEATS else "") + "\n"
             f"then read both files' clips as one context: python -m rtcohand_drake.context_reading {both}"
             + "".join(f" {m}" for m in model) + " (python -m rtcohand_drake.run takes the same --context-file)")

@@ -33,17 +33,11 @@ from typing import Sequence
 
 import numpy as np
 
-from rtcohand_drake.errors import InputError, run_cli
-
-
-
-class _ArgumentParser(argparse.ArgumentParser):
-    def error(self, message):  # argparse's own errors: one line, status 2
-        raise InputError(f"command line: {message}")
+from rtcohand_drake.errors import ArgumentParser, InputError, non_negative_int, run_cli, writable_file_path
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = _ArgumentParser(prog="python -m rtcohand_drake.run", description=__doc__.split("\n")[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.run", description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="inspection", help="built-in scenario name or path to a YAML file")
     p.add_argument("--duration", type=float, default=None,
                    help="simulated seconds (default: the scenario's, or the end of a replayed stream)")
@@ -52,7 +46,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-meshcat", action="store_true", help="run headless")
     p.add_argument("--no-wait", action="store_true",
                    help="with Meshcat: exit at the end of the run instead of serving the page until Ctrl-C")
-    p.add_argument("--seed", type=int, default=0, help="seeds the policy's latent draws and the simulated person")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seeds the policy's latent draws and the simulated person")
     from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES
 
     p.add_argument("--gesture-source", choices=tuple(GESTURE_SOURCES), default=None,
@@ -64,7 +59,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", choices=("train", "test"), default=None,
                    help="replay source: only the clips of this split (test: the person's held-out clips, "
                         "their other labelled clips the context)")
-    p.add_argument("--camera", type=int, default=None, help="camera source: the OpenCV camera number")
+    p.add_argument("--camera", type=non_negative_int, default=None, help="camera source: the OpenCV camera number")
     p.add_argument("--video", type=Path, default=None,
                    help="camera source: a video file, played in simulated time at its own frame rate")
     p.add_argument("--camera-calibration", type=Path, default=None,
@@ -76,7 +71,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--context-user", default=None,
                    help="which user of --context-file (needed when the files hold more than one)")
     p.add_argument("--user", default=None, help="the simulated person's user id (synthetic source)")
-    p.add_argument("--population-seed", type=int, default=None,
+    p.add_argument("--population-seed", type=non_negative_int, default=None,
                    help="the generated population the simulated person comes from (data.generate --seed; "
                         "default 0, the benchmark's)")
     p.add_argument("--model", type=Path, default=None, help="exported TorchScript policy (default: the scenario's)")
@@ -99,9 +94,9 @@ def _check_args(args) -> None:
         raise InputError(f"command line: --duration must be a positive number of seconds, got {args.duration}")
     if args.realtime_rate is not None and not (math.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
         raise InputError(f"command line: --realtime-rate must be >= 0, got {args.realtime_rate}")
-    for path in (args.log, args.html):
-        if path is not None and not (path.parent if str(path.parent) else Path(".")).is_dir():
-            raise InputError(f"{path}: directory {path.parent} does not exist")
+    for flag, path in (("--log", args.log), ("--html", args.html)):
+        if path is not None:
+            writable_file_path(path, flag)
     camera_flags = args.camera is not None or args.video is not None or args.camera_calibration is not None
     if args.gesture_source is None:
         args.gesture_source = ("replay" if args.gesture_file is not None else "camera" if camera_flags
@@ -118,6 +113,11 @@ def _check_args(args) -> None:
         raise InputError("command line: --gesture-source camera needs exactly one of --camera N and --video PATH")
     if args.gesture_source != "camera" and camera_flags:
         raise InputError("command line: --camera, --video and --camera-calibration go with --gesture-source camera")
+    from rtcohand_drake.systems.gestures.registry import GESTURE_SOURCES
+
+    if not GESTURE_SOURCES[args.gesture_source].uses_policy and (args.model is not None or args.context_file):
+        raise InputError(f"command line: --model and --context-file go with a source the policy reads; "
+                         f"--gesture-source {args.gesture_source} commands the arm without it")
     if args.population_seed is not None and args.gesture_source not in ("synthetic", "joystick"):
         raise InputError("command line: --population-seed goes with the synthetic and joystick gesture sources")
     if args.context_user is not None and args.context_file is None:

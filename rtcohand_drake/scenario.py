@@ -144,6 +144,11 @@ def _check_values(s: Scenario, source: str) -> None:
     need(0 < s.policy.rate_hz <= 100, "policy.rate_hz must be in (0, 100]")
     need(0.0 <= s.policy.correction_weight <= 1.0,
          f"policy.correction_weight must be in [0, 1], got {s.policy.correction_weight}")
+    need(math.isfinite(s.policy.output_gain) and 1.0 <= s.policy.output_gain <= 5.0,
+         f"policy.output_gain must be in [1, 5], got {s.policy.output_gain}")
+    r = s.robot
+    need(all(math.isfinite(v) and v >= 0 for v in list(r.kp_nm_per_rad) + list(r.kd_nm_s_per_rad)),
+         "robot.kp_nm_per_rad and robot.kd_nm_s_per_rad entries must be >= 0")
     d = s.diff_ik
     need(d.min_cell_clearance_m >= 0 and d.cell_clearance_within_m > d.min_cell_clearance_m
          and d.clearance_approach_time_s > 0,
@@ -205,6 +210,25 @@ def _check_values(s: Scenario, source: str) -> None:
         need(seg.duration_s > 0, f"scripted_motion[{i}].duration_s must be > 0")
 
 
+def _check_duplicate_keys(text: str, source: str) -> None:
+    """A key given twice in one mapping: YAML keeps the last silently, so one of the two settings would be
+    ignored without a word."""
+    def walk(node) -> None:
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode):
+                    if key.value in seen:
+                        raise ScenarioError(f"{source}: line {key.start_mark.line + 1}: {key.value!r} is given twice")
+                    seen.add(key.value)
+                walk(value)
+        elif isinstance(node, yaml.SequenceNode):
+            for item in node.value:
+                walk(item)
+
+    walk(yaml.compose(text))
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Loads and validates a scenario; raises ScenarioError (one line) on bad input."""
     from pydrake.common.yaml import yaml_load_typed
@@ -223,7 +247,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         problem = getattr(err, "problem", None) or "malformed YAML"
         raise ScenarioError(f"{source}: {at}malformed YAML ({problem})") from None
     if node is None:
-        node = {}
+        raise ScenarioError(f"{source}: the file is empty (give a mapping of settings, as "
+                            "rtcohand_drake/scenarios/inspection.yaml; an empty mapping {} means every default)")
+    _check_duplicate_keys(text, source)
     _check_against_schema(node, Scenario, "", source)
     try:
         scenario = yaml_load_typed(schema=Scenario, data=text)

@@ -158,7 +158,7 @@ def _parse_error(module: str, args: list[str]) -> str | None:
 def _excused(message: str, args: list[str], inline: bool) -> bool:
     """A placeholder value (`--camera N`) of a number flag; in prose, a fragment that names some
     flags of a command (`--populations`, without the required ones)."""
-    if re.search(r"invalid (?:int|float|_\w+) value: '[A-Z][A-Za-z_0-9]*'", message):
+    if re.search(r"(?:invalid (?:int|float|_\w+) value|must be a (?:whole )?number, got) '[A-Z][A-Za-z_0-9]*'", message):
         return True
     if inline and "the following arguments are required" in message:
         return True

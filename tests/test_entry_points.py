@@ -74,6 +74,24 @@ def test_corrupt_model_file(tmp_path, good_data, content):
                      str(bad))
 
 
+def test_a_model_file_damaged_inside_its_weights_is_refused(tmp_path, good_data):
+    """Bytes changed inside a weight tensor leave a readable archive that would load and run with wrong
+    numbers; every entry's CRC-32 is checked first."""
+    import pathlib
+    import zipfile
+
+    shipped = pathlib.Path(__file__).resolve().parents[1] / "models" / "cchp_default.pt"
+    with zipfile.ZipFile(shipped) as archive:
+        info = max(archive.infolist(), key=lambda i: i.file_size)  # the largest tensor
+    data = bytearray(shipped.read_bytes())
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + 64
+    data[start:start + 256] = bytes(256)
+    bad = tmp_path / "damaged.pt"
+    bad.write_bytes(bytes(data))
+    _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(good_data), "--model", str(bad)),
+                     str(bad), "fails its checksum")
+
+
 def test_unknown_clip_and_user(good_data):
     _assert_one_line(_run("--gesture-source", "replay", "--gesture-file", str(good_data), "--clip", "nobody/x"),
                      "nobody/x")
@@ -96,7 +114,12 @@ def test_malformed_yaml(tmp_path):
     (["--gesture-source", "replay"], "needs --gesture-file"),
     (["--context-user", "u0"], "--context-user goes with --context-file"),
     (["--gesture-source", "bogus"], "invalid choice"),
-    (["--seed", "x"], "invalid int value"),
+    (["--seed", "x"], "--seed: must be a whole number"),
+    (["--seed", "-1"], "--seed: must be >= 0"),
+    (["--gesture-source", "camera", "--camera", "-1"], "--camera: must be >= 0"),
+    (["--gesture-source", "scripted", "--model", "models/cchp_default.pt"], "--model and --context-file go with"),
+    (["--log", "tests"], "--log tests: is a folder"),
+    (["--model", "tests"], "tests: a folder, not a policy file"),
     (["--gesture-source", "scripted", "--population-seed", "2"], "--population-seed goes with the synthetic"),
 ])
 def test_bad_flags(args, fragment):

@@ -65,8 +65,14 @@ def test_reading_check_names_the_motions(tmp_path, capsys, monkeypatch):
     assert 0 < len(weak) < 4
     again = tmp_path / "few_again.h5"
     assert f"read below half their size: {', '.join(weak)}" in text
-    assert (f"python -m rtcohand_drake.record --out {again} --user ME --style hold --only {','.join(weak)} "
-            "--repeats 1" in text)
+    hint = (f"python -m rtcohand_drake.record --out {again} --user ME --simulated-user u11 --population-seed 0 "
+            f"--seed 0 --no-meshcat --style hold --only {','.join(weak)} --repeats 1")
+    assert hint in text
+    # The printed command records them again as printed (the same person, source and settings).
+    import shlex
+
+    assert main(shlex.split(hint.split("python -m rtcohand_drake.record ", 1)[1]) + ["--no-check"]) == 0
+    assert {c.clip_id.split("_", 1)[1] for c in read_dataset(again)} == set(weak)
     assert f"--context-file {out} {again} --context-user ME" in text
     monkeypatch.setattr(context_reading, "READS", -10.0)
     assert main(["--out", str(out), "--user", "ME", "--simulated-user", "u11", "--no-meshcat",

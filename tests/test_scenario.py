@@ -35,6 +35,10 @@ def _write(tmp_path, text):
     ("duration_s: -3\n", "duration_s must be > 0"),
     ("workspace: {min_xyz: [0, 0, 1], max_xyz: [1, 1, 0]}\n", "min_xyz must be below max_xyz"),
     ("safety: {mold_turn_height_m: -0.1}\n", "mold corridor heights and margin must be >= 0"),
+    ("", "the file is empty"),
+    ("duration_s: 30\nlog_rate_hz: 60\nduration_s: 40\n", "line 3: 'duration_s' is given twice"),
+    ("policy: {output_gain: 0.0}\n", "policy.output_gain must be in [1, 5], got 0.0"),
+    ("robot:\n  kp_nm_per_rad: [2000, 2000, 2000, -2000, 500, 500, 500]\n", "robot.kp_nm_per_rad and"),
 ])
 def test_bad_scenario_is_one_line_naming_file_and_problem(tmp_path, text, expected):
     path = _write(tmp_path, text)

@@ -39,7 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.errors import ArgumentParser, InputError, non_negative_int, positive_float, run_cli
 from rtcohand_drake.record import DEFAULT_REPEATS
 
 MOTION_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -370,14 +370,14 @@ def builtin_clips(user: str, rate_hz: float, population_seed: int | None = None,
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.context_reading", description=__doc__.splitlines()[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.context_reading", description=__doc__.splitlines()[0])
     p.add_argument("--context-file", type=Path, nargs="+", action="extend", default=None, metavar="PATH.h5",
                    help="dataset file(s) with the user's labelled clips; several files (say a first session "
                         "and one re-recording weak motions) are read together as one context")
     p.add_argument("--context-user", default=None,
                    help="which user of --context-file (needed when the files hold more than one)")
     p.add_argument("--user", default=None, help="a built-in simulated user instead (u00 .. u14)")
-    p.add_argument("--population-seed", type=int, default=None,
+    p.add_argument("--population-seed", type=non_negative_int, default=None,
                    help="with --user: the generated population (data.generate --seed; default 0, the benchmark's)")
     p.add_argument("--scenario", default="inspection",
                    help="scenario whose policy settings (model, correction_weight) are checked")
@@ -396,7 +396,7 @@ def make_parser() -> argparse.ArgumentParser:
                    help="the ridge reference's window (policy steps) and lambda (default 10 100)")
     p.add_argument("--knn", nargs=2, type=int, default=None, metavar=("WINDOW", "K"),
                    help="the nearest-neighbour reference's window (policy steps) and k (default 20 20)")
-    p.add_argument("--rate-hz", type=float, default=10.0,
+    p.add_argument("--rate-hz", type=positive_float, default=10.0,
                    help="the policy rate (Hz) the clips are resampled to before they are read (default 10, "
                         "the run's)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
@@ -413,6 +413,9 @@ def check(argv: Sequence[str] | None = None) -> list[str]:
         raise InputError("command line: --population-seed goes with --user")
     if args.folds < 2:
         raise InputError("command line: --folds must be >= 2")
+    from rtcohand_drake.learning.evaluate import check_reference_args
+
+    check_reference_args(args.ridge, args.knn)
     from rtcohand_drake.cell.robot_files import policy_file_path
     from rtcohand_drake.data.dataset import as_paths, is_generated
     from rtcohand_drake.learning.policy_file import load_policy

@@ -43,13 +43,14 @@ import dataclasses as dc
 import contextlib
 import io
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from rtcohand_drake.errors import run_cli
+from rtcohand_drake.errors import ArgumentParser, InputError, non_negative_int, positive_float, run_cli
 
 CONDITIONS = ("responsive", "paper", "joystick", "intent")
 GESTURE_CONDITIONS = ("responsive", "paper")  # the conditions a policy file reads
@@ -242,14 +243,21 @@ def plot(results: dict, conditions: Sequence[str], cap_s: float, out: Path) -> N
 
 def _int_list(text: str) -> list[int]:
     """'100-119' or '100' as a list of ints (the command line's population ranges)."""
-    if "-" in text.strip("-"):
-        a, b = text.split("-", 1)
-        return list(range(int(a), int(b) + 1))
-    return [int(text)]
+    try:
+        if "-" in text.strip("-"):
+            a, b = (int(v) for v in text.split("-", 1))
+            values = list(range(a, b + 1))
+        else:
+            values = [int(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a seed such as 100 or a range such as 100-119, got {text!r}") from None
+    if not values or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"expected seeds >= 0 and a range from low to high, got {text!r}")
+    return values
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.study", description=__doc__.splitlines()[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.study", description=__doc__.splitlines()[0])
     p.add_argument("--populations", type=_int_list, nargs="+", default=[[100], [101], [102]],
                    help="population seeds, or ranges such as 100-119 (five out-sample people each)")
     p.add_argument("--users", nargs="+", default=list(OUT_SAMPLE))
@@ -264,19 +272,19 @@ def make_parser() -> argparse.ArgumentParser:
                         "(default: inspection)")
     p.add_argument("--no-hand-sign", action="store_true",
                    help="with --recorded-people: run a copy of the scenario with the pause hand sign off")
-    p.add_argument("--run-seeds", type=int, nargs="+", default=None,
+    p.add_argument("--run-seeds", type=non_negative_int, nargs="+", default=None,
                    help="the runs' --seed (the people's decision rhythm), each person runs each (default: 0)")
-    p.add_argument("--seed", type=int, default=None, help="one run seed (the same as --run-seeds N)")
-    p.add_argument("--cap", type=float, default=None, help="the runs' time cap (s; default: the scenario's)")
+    p.add_argument("--seed", type=non_negative_int, default=None, help="one run seed (the same as --run-seeds N)")
+    p.add_argument("--cap", type=positive_float, default=None, help="the runs' time cap (s; default: the scenario's)")
     p.add_argument("--model", type=Path, default=None,
                    help="the policy file of the gesture conditions (default: the scenario's)")
-    p.add_argument("--workers", "--jobs", type=int, default=2,
+    p.add_argument("--workers", "--jobs", type=non_negative_int, default=2,
                    help="local cluster worker processes; 0 runs in this process")
     p.add_argument("--address", default=None, help="an existing Dask scheduler to run on (tcp://HOST:8786)")
-    p.add_argument("--runs-per-worker", type=int, default=0,
+    p.add_argument("--runs-per-worker", type=non_negative_int, default=0,
                    help="restart the Dask workers after this many runs each (0: never); a worker's memory grows "
                         "by about 14 MB a run (docs/studies.md)")
-    p.add_argument("--bootstrap", type=int, default=10000, help="bootstrap resamples for the intervals")
+    p.add_argument("--bootstrap", type=non_negative_int, default=10000, help="bootstrap resamples for the intervals")
     p.add_argument("--out", type=Path, default=Path("docs/results/study"))
     p.add_argument("--logs", type=Path, default=None, help="where the run logs go (default: OUT/logs)")
     p.add_argument("--summarise-only", action="store_true",
@@ -289,10 +297,14 @@ def make_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     p = make_parser()
     args = p.parse_args(argv)
-    if args.runs_per_worker < 0:
-        p.error("--runs-per-worker must be 0 (never restart) or more")
-    if args.model is not None and not args.model.is_file():
-        p.error(f"--model {args.model}: no such file")
+    if args.bootstrap < 1:
+        p.error(f"--bootstrap must be at least 1, got {args.bootstrap}")
+    if args.model is not None:
+        from rtcohand_drake.learning.policy_file import load_policy
+
+        load_policy(args.model)  # a missing or damaged file: one line now, not in every run
+    if args.address is not None and not re.fullmatch(r"(tcp://)?[^\s:/]+:\d+", args.address):
+        p.error(f"--address {args.address!r}: give a Dask scheduler as tcp://HOST:PORT")
     if args.recorded_people is not None:
         from rtcohand_drake.analysis.recorded_study import main_recorded
 
@@ -300,6 +312,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.people is not None or args.no_hand_sign or args.scenario is not None:
         p.error("--people, --scenario and --no-hand-sign go with --recorded-people")
     args.conditions = args.conditions or list(CONDITIONS)
+    from rtcohand_drake.systems.gestures.simulated_person import population_user_ids
+
+    unknown = [u for u in args.users if u not in population_user_ids()]
+    if unknown:
+        p.error(f"--users: unknown {', '.join(unknown)}; valid ids: {', '.join(population_user_ids())}")
     model = str(args.model.resolve()) if args.model is not None else None
     from rtcohand_drake.analysis.engine import Outcome, run_tasks
     from rtcohand_drake.repo_paths import repo_relative
@@ -326,6 +343,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                           + ("running it again" if args.resume else "left out"), file=sys.stderr)
     if args.summarise_only:
         outcomes = [done[k] for k in keys if k in done]
+        if not outcomes:
+            raise InputError(f"--summarise-only: no run log of these runs in {logs}")
     else:
         def describe(o: Outcome) -> str:
             pop, user, c, seed = o.key

@@ -16,6 +16,7 @@ from dataclasses import replace
 from rtcohand_drake.data.dataset import write_dataset
 from rtcohand_drake.data.population import GeneratorConfig, generate_population
 from rtcohand_drake.data.population.config import RECORDED_TRACKING
+from rtcohand_drake.errors import non_negative_int
 
 
 class _Parser(argparse.ArgumentParser):
@@ -49,7 +50,7 @@ def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="python -m rtcohand_drake.data.generate", description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True, help="output dataset file (.h5)")
     parser.add_argument("--users", type=_positive_int, default=15, help="number of users (2/3 in-sample)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed")
     parser.add_argument("--fps", type=_fps, default=GeneratorConfig.fps, help="keypoint frame rate, Hz")
     parser.add_argument("--single-stroke-share", type=_share, default=GeneratorConfig.p_single_stroke,
                         help="share of users who make each move or turn as one stroke out and partly back, "

@@ -69,7 +69,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from rtcohand_drake.data.dataset import DIMENSIONS, Clip, write_dataset
-from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.errors import ArgumentParser, InputError, non_negative_int, run_cli
 
 FPS = 30.0  # the SR300 skeleton stream's rate (dataset description)
 NUM_JOINTS = 22
@@ -296,6 +296,9 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
                          if held_out == 1 else
                          f"the last {held_out} repetitions of each mapped variant, the first always context "
                          f"(split test); the others are context (train)")}
+    if not clips:
+        raise InputError(f"{root}: no labelled gesture of {', '.join(f's{s:02d}' for s in wanted) or 'any subject'} "
+                         "could be read (no usable skeleton sequence); nothing written")
     write_dataset(out, clips, root_attrs={"import": json.dumps(meta)},
                   user_attrs={u: {"command_map": json.dumps(m)} for u, m in maps.items()})
     return {"people": len(wanted), "clips": len(clips), "held_out": sum(c.split == "test" for c in clips),
@@ -303,14 +306,13 @@ def import_shrec17(root: Path, out: Path, mapping: str = "natural", subjects: Se
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.data.import_shrec17",
-                                description=__doc__.splitlines()[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.data.import_shrec17", description=__doc__.splitlines()[0])
     p.add_argument("--root", required=True, type=Path, help="the dataset's folder (holds gesture_1 .. gesture_14)")
     p.add_argument("--out", required=True, type=Path, help="the gesture dataset file to write (.h5)")
     p.add_argument("--mapping", choices=MAPPINGS, default="natural", help="who commands what: natural (one fixed map, one motion in two postures), whole-hand (one fixed "
                         "map, every gesture with the whole hand) or custom (12 variants drawn per person); default natural")
     p.add_argument("--subjects", type=int, nargs="+", default=None, help="subject numbers (default: all found)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the custom maps")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the custom maps")
     p.add_argument("--group", choices=("out-sample", "in-sample"), default="out-sample",
                    help="the users' group in the file (default out-sample)")
     p.add_argument("--rest-s", type=float, default=0.5, help="still hand before and after each gesture, s")

@@ -53,7 +53,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.errors import ArgumentParser, InputError, run_cli
 from rtcohand_drake.learning.batching import collate
 from rtcohand_drake.data.hand_features import FEATURE_DIM
 from rtcohand_drake.data.sampling import ALL_SETTINGS, PERSON_SETTING, SETTINGS
@@ -453,6 +453,9 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
     clips = ([dataclasses.replace(c, features=c.features[:, :FEATURE_DIM]) for c in wide_clips] if wide_settings
              else wide_clips)
     episodes = {s: evaluation_episodes(clips, s, seed) for s in settings}
+    if not any(episodes.values()):
+        raise InputError(f"{data}: no episodes of {', '.join(settings)} (a file with no users, or no clips for "
+                         "these settings)")
     # The same episodes (same clips in the same order, same draws) on the wider input.
     wide = {s: evaluation_episodes(wide_clips, s, seed) for s in wide_settings}
     if max_episodes > 0:
@@ -552,7 +555,7 @@ def evaluate(data: str, checkpoints: Sequence[str], out: str, names: Optional[Se
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.evaluate", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m rtcohand_drake.evaluate", description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="gesture dataset file (docs/interfaces.md, the gesture dataset file)")
     p.add_argument("--checkpoint", required=True, nargs="+", help="checkpoints; those with the same name are seeds")
     p.add_argument("--names", nargs="+", default=None, help="model names, one per checkpoint")
@@ -577,10 +580,23 @@ def make_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_reference_args(ridge: Optional[Sequence[float]], knn: Optional[Sequence[int]]) -> None:
+    """The per-person references' settings from a command line (`--ridge WINDOW LAMBDA`, `--knn WINDOW K`;
+    None: not given), checked before any work: one-line InputErrors."""
+    if ridge is not None and not (ridge[0] >= 1 and float(ridge[0]).is_integer() and ridge[1] >= 0):
+        raise InputError(f"command line: --ridge WINDOW LAMBDA needs a whole WINDOW >= 1 and LAMBDA >= 0, "
+                         f"got {ridge[0]:g} {ridge[1]:g}")
+    if knn is not None and not (knn[0] >= 1 and knn[1] >= 1):
+        raise InputError(f"command line: --knn WINDOW K needs both >= 1, got {knn[0]} {knn[1]}")
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = make_parser().parse_args(argv)
     if args.names and len(args.names) != len(args.checkpoint):
         raise InputError(f"--names gives {len(args.names)} names for {len(args.checkpoint)} checkpoints")
+    check_reference_args(args.ridge, args.knn)
+    if pathlib.Path(args.out).exists() and not pathlib.Path(args.out).is_dir():
+        raise InputError(f"--out {args.out}: is a file; give a folder")
     results = evaluate(args.data, args.checkpoint, args.out, args.names, args.seed, args.settings,
                        args.noise_sweep, args.spectrum, args.attention, args.threads,
                        args.max_episodes, parse_overrides(args.set), (int(args.ridge[0]), float(args.ridge[1])),

@@ -523,11 +523,18 @@ def save_scripted(scripted: torch.jit.ScriptModule, out: os.PathLike, card: dict
                   card_name: str = "model_card.json") -> pathlib.Path:
     """Write a scripted module to `out` with `card` as the JSON file `card_name` inside it, atomically
     (a write that fails leaves any earlier file whole)."""
+    from rtcohand_drake.errors import InputError
+
     out = pathlib.Path(out)
+    if out.is_dir():
+        raise InputError(f"--out {out}: is a folder; give a file path")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
-    torch.jit.save(scripted, str(tmp), _extra_files={card_name: json.dumps(card, indent=1)})
-    os.replace(tmp, out)
+    try:
+        torch.jit.save(scripted, str(tmp), _extra_files={card_name: json.dumps(card, indent=1)})
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
     return out
 
 

@@ -28,12 +28,23 @@ def torch_archive_kind(path: os.PathLike, expected: str) -> str:
     `expected` ("policy" or "checkpoint") names the file the caller wants, in the messages.
     """
     path = pathlib.Path(path)
+    if path.is_dir():
+        raise PolicyFileError(f"{path}: a folder, not a {expected} file")
     if not path.is_file():
         raise PolicyFileError(f"{path}: no such {expected} file")
     if not zipfile.is_zipfile(path):
         raise PolicyFileError(f"{path}: not a {_NAMES[expected]} (not a PyTorch archive; truncated or corrupt?)")
-    with zipfile.ZipFile(path) as archive:
-        scripted = any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist())
+    try:
+        with zipfile.ZipFile(path) as archive:
+            scripted = any(n.split("/", 1)[-1].startswith("code/") for n in archive.namelist())
+            # Every entry against its CRC-32: a file damaged inside its weights would otherwise load and
+            # run with wrong numbers.
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as err:
+        raise PolicyFileError(f"{path}: not a {_NAMES[expected]} (a damaged archive: {err})") from None
+    if damaged is not None:
+        raise PolicyFileError(f"{path}: a damaged {_NAMES[expected]} ({damaged.split('/', 1)[-1]} fails its "
+                              "checksum); copy the file again")
     return "torchscript" if scripted else "pickle"
 
 

@@ -31,7 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rtcohand_drake.errors import InputError, run_cli
+from rtcohand_drake.errors import InputError, non_negative_int, run_cli
 from rtcohand_drake.vision.calibration import CameraCalibration, load_calibration
 
 
@@ -60,7 +60,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True,
                    help="the calibration file to write (YAML), for --camera-calibration of run and record")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--camera", type=int, help="a live camera (OpenCV camera number), read for up to 5 s")
+    src.add_argument("--camera", type=non_negative_int, help="a live camera (OpenCV camera number), read for up to 5 s")
     src.add_argument("--image", type=Path, help="one image of the marker from the camera, instead of a live camera")
     p.add_argument("--intrinsics", type=Path, default=None,
                    help="a calibration file whose intrinsics (image size, focal length, principal point, "
@@ -93,9 +93,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise InputError(f"{args.image}: not a readable image")
         frames = [image]
     else:
-        capture = cv2.VideoCapture(args.camera)
-        if not capture.isOpened():
-            raise InputError(f"camera {args.camera}: cannot open it")
+        from rtcohand_drake.vision.capture import open_capture
+
+        capture = open_capture(args.camera, f"camera {args.camera}")
         frames = []
         print("hold the marker still where your hand will gesture ...", flush=True)
     import time

@@ -78,11 +78,20 @@ class HandPipeline:
         self.landmarker.close()
 
 
-def _open(source, what: str):
+def open_capture(source, what: str):
+    """cv2.VideoCapture(source) (a camera number or a video file), or a one-line InputError. OpenCV's own
+    log lines while it tries its back ends (a WARN or ERROR each, for a camera that is not there) are
+    silenced; the error says what could not be opened."""
     import cv2
 
-    capture = cv2.VideoCapture(source)
-    if not capture.isOpened():
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        capture = cv2.VideoCapture(source)
+        opened = capture.isOpened()
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if not opened:
         raise InputError(f"{what}: cannot open it as a video stream")
     return capture
 
@@ -97,7 +106,7 @@ class VideoFileTracker:
         if not self.path.is_file():
             raise InputError(f"{self.path}: no such video file")
         self._pipeline = pipeline
-        capture = _open(str(self.path), str(self.path))
+        capture = open_capture(str(self.path), str(self.path))
         self.fps = float(capture.get(cv2.CAP_PROP_FPS))
         count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         capture.release()
@@ -121,7 +130,7 @@ class VideoFileTracker:
     def _rewind(self) -> None:
         if self._capture is not None:
             self._capture.release()
-        self._capture = _open(str(self.path), str(self.path))
+        self._capture = open_capture(str(self.path), str(self.path))
         self._index, self._ended = -1, False
         self._result = (None, -math.inf)
 
@@ -163,7 +172,7 @@ class LiveCameraTracker:
         """`device`: an OpenCV camera number, or a path (a video file read as if it were a camera)."""
         self._pipeline = pipeline
         source = int(device) if isinstance(device, int) else str(device)
-        self._capture = _open(source, f"camera {device}")
+        self._capture = open_capture(source, f"camera {device}")
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray | None, float] = (None, -math.inf)  # keypoints, capture time (monotonic)
         self._marker = None  # the marked object's pose in that frame
