@@ -184,7 +184,8 @@ def _policy_context(model, load, real_hands: bool = False):
 
 
 def _build_with_policy(args, scenario, meshcat, station, model, setup):
-    from rtcohand_drake.data.dataset import context_pieces, is_generated, label_lag_s, missing_motions
+    from rtcohand_drake.data.dataset import (context_pieces, is_generated, label_lag_s, lost_hand_share,
+                                             missing_motions)
     from rtcohand_drake.diagram import build_run_diagram
     from rtcohand_drake.systems.gestures.registry import reads_real_hands
     from rtcohand_drake.systems.policy import CchpPolicy
@@ -203,6 +204,11 @@ def _build_with_policy(args, scenario, meshcat, station, model, setup):
     else:
         raise InputError(f"command line: --gesture-source {args.gesture_source} needs --context-file "
                          "(the user's own labelled clips)")
+    lost = lost_hand_share(pieces)
+    if lost > 0.5:
+        print(f"warning: the context's clips lose the hand in {lost:.0%} of their labelled steps, which the "
+              "policy reads as no motion: it learns little from them; record them again with the hand in view",
+              file=sys.stderr)
     missing = missing_motions(pieces)
     if missing:
         record = f"python -m rtcohand_drake.record --only {','.join(missing)}"

@@ -159,3 +159,21 @@ def test_missing_motions_warning_says_how_to_add_them_and_a_second_file_does(tmp
     assert f"--user {clips[0].user} --only Ty+," in warning[0] and "add MORE.h5 to --context-file" in warning[0]
     assert main([*common, "--context-file", str(first), str(more)]) == 0
     assert "holds no example" not in capsys.readouterr().err
+
+
+def test_a_context_whose_hand_is_lost_in_its_gestures_is_named_in_a_warning(tmp_path, good_data):
+    """A context file whose clips never show the hand (NaN keypoints) gives features of no motion; the run
+    still runs (the part does not move: safe), and says why in one warning line."""
+    from rtcohand_drake.data.dataset import context_pieces, lost_hand_share
+
+    lost = tmp_path / "lost.h5"
+    lost.write_bytes(good_data.read_bytes())
+    with h5py.File(lost, "r+") as f:
+        user = next(iter(f["users"]))
+        for clip in f["users"][user]["clips"].values():
+            clip["keypoints"][...] = np.nan
+    assert lost_hand_share(context_pieces([good_data], user, 10.0)[0]) < 0.1
+    assert lost_hand_share(context_pieces([lost], user, 10.0)[0]) > 0.95
+    proc = _run("--gesture-source", "replay", "--gesture-file", str(good_data), "--context-file", str(lost))
+    warnings = [line for line in proc.stderr.splitlines() if "lose the hand" in line]
+    assert proc.returncode == 0 and len(warnings) == 1, proc.stderr[-2000:]

@@ -32,7 +32,7 @@ from typing import Iterable
 import numpy as np
 
 from rtcohand_drake.errors import InputError
-from rtcohand_drake.data.hand_features import frame_times, hand_features, path_shape_features, resample
+from rtcohand_drake.data.hand_features import FEATURE_DIM, frame_times, hand_features, path_shape_features, resample
 
 FORMAT = "rtcohand-gestures"
 VERSION = 1
@@ -434,6 +434,21 @@ def missing_motions(pieces, share: float = 0.25, min_steps: int = 3) -> list[str
                 if level <= 0.0 or int(np.count_nonzero(sign * labels[:, d] >= level)) < min_steps:
                     missing.append(DIMENSIONS[d] + mark)
     return missing
+
+
+def lost_hand_share(pieces) -> float:
+    """The share of a context's labelled steps (any label nonzero) that show no hand motion at all: every
+    one of the 36 hand-part velocities zero or not finite, as where the tracker lost the hand (a tracked
+    hand never holds exactly still); 0 for a context with no labelled step. The policy reads such a step
+    as no motion, so a context lost in most of its gestures teaches it little."""
+    lost = labelled = 0
+    for x, y in pieces:
+        on = np.abs(np.nan_to_num(np.asarray(y, np.float64).reshape(len(x), -1))).sum(1) > 0
+        gone = ~(np.nan_to_num(np.asarray(x, np.float64)[:, :FEATURE_DIM], nan=0.0, posinf=0.0, neginf=0.0)
+                 != 0).any(1)
+        lost += int(np.count_nonzero(gone & on))
+        labelled += int(np.count_nonzero(on))
+    return lost / labelled if labelled else 0.0
 
 
 def _some(names: list[str], shown: int = 8) -> str:
