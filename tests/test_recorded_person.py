@@ -302,5 +302,7 @@ def test_study_of_recorded_people_runs_the_scenario_given(people, tmp_path):
     with pytest.raises(ScenarioError):
         study.main(["--recorded-people", str(people), "--scenario", str(tmp_path / "bad.yaml"), "--workers", "0",
                     "--out", str(out)])
-    with pytest.raises(SystemExit):  # only with --recorded-people
+    from rtcohand_drake.errors import InputError
+
+    with pytest.raises(InputError, match="go with --recorded-people"):  # only with --recorded-people
         study.main(["--scenario", str(mine), "--out", str(out)])

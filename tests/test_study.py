@@ -225,19 +225,30 @@ def test_a_run_that_raises_is_retried_once_then_reported(tmp_path, workers):
             assert good.peak_memory_gb <= hwm_kb / 1e6 + 1e-9
 
 
-def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsys):
-    # In this process: a person who cannot run is reported with the error, and the exit status says so.
+def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsys, monkeypatch):
+    # In this process: a person whose runs fail is reported with the error, and the exit status says so.
+    # (An unknown user id is refused before any run; here u13's runs raise as a broken run would.)
+    from rtcohand_drake.errors import InputError
+
+    run_condition = study.run_condition
+
+    def failing_for_u13(population, user, *rest):
+        if user == "u13":
+            raise InputError("a run that fails")
+        return run_condition(population, user, *rest)
+
+    monkeypatch.setattr(study, "run_condition", failing_for_u13)
     out = tmp_path / "study"
-    status = study.main(["--populations", "101", "--users", "u10", "u99", "--conditions", "joystick", "intent",
+    status = study.main(["--populations", "101", "--users", "u10", "u13", "--conditions", "joystick", "intent",
                          "--cap", "1", "--workers", "0", "--bootstrap", "200", "--out", str(out)])
     assert status == 1
     text = (out / "study.md").read_text()
     assert "Runs failed with an error after a retry (2):" in text
-    assert "p101/u99 joystick run seed 0" in text and "unknown user 'u99'" in text
+    assert "p101/u13 joystick run seed 0" in text and "a run that fails" in text
     data = json.loads((out / "study.json").read_text())
     run = data["results"]["p101/u10"]["joystick"]["0"]
     assert run["completed"] is False and run["completion_s"] is None and 0 <= run["faces"] < 6  # capped at 1 s
-    assert data["results"]["p101/u99"]["intent"]["0"] is None
+    assert data["results"]["p101/u13"]["intent"]["0"] is None
     assert [c["condition"] for c in data["comparisons"]] == ["intent"]
     assert (out / "study.png").stat().st_size > 0
     assert "Engine: in-process" in text and "largest peak memory of a process that ran them:" in text
@@ -245,7 +256,7 @@ def test_the_study_command_reports_failures_and_writes_its_files(tmp_path, capsy
     logs = out / "logs"
     stamp = {p.name: p.stat().st_mtime_ns for p in logs.glob("*.h5")}
     assert sorted(stamp) == ["p101_u10_intent_s0.h5", "p101_u10_joystick_s0.h5"]
-    status = study.main(["--populations", "101", "--users", "u10", "u99", "--conditions", "joystick", "intent",
+    status = study.main(["--populations", "101", "--users", "u10", "u13", "--conditions", "joystick", "intent",
                          "--cap", "1", "--workers", "0", "--bootstrap", "200", "--out", str(out), "--resume"])
     assert status == 1 and {p.name: p.stat().st_mtime_ns for p in logs.glob("*.h5")} == stamp
     again = json.loads((out / "study.json").read_text())
@@ -276,7 +287,9 @@ def test_the_study_runs_its_gesture_conditions_with_the_policy_file_given(tmp_pa
     # The committed summary names the file relative to the repository, not where it was checked out.
     assert json.loads((out / "study.json").read_text())["model"] == "models/cchp_path_shape.pt"
     assert "read the policy file" in (out / "study.md").read_text()
-    with pytest.raises(SystemExit):
+    from rtcohand_drake.errors import InputError
+
+    with pytest.raises(InputError, match="no such policy file"):  # before any run
         study.main(["--model", str(tmp_path / "none.pt"), "--out", str(out)])
 
 @needs_dask
