@@ -388,9 +388,9 @@ def make_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _check_before_recording(args) -> None:
+def _check_before_recording(args):
     """What would otherwise fail only after the session is recorded: where it is written, the user id it
-    is written under, the scenario, and the policy file the reading check reads it with."""
+    is written under, the scenario (returned), and the policy file the reading check reads it with."""
     from rtcohand_drake.scenario import load_scenario
 
     writable_file_path(args.out, "--out")
@@ -400,15 +400,16 @@ def _check_before_recording(args) -> None:
     scenario = load_scenario(args.scenario)
     if not args.no_check:
         from rtcohand_drake.cell.robot_files import policy_file_path
-        from rtcohand_drake.learning.policy_file import load_policy
+        from rtcohand_drake.learning.policy_file import check_policy_file
 
         named = getattr(scenario.policy, "real_hand_model", "") or scenario.policy.model
-        load_policy(args.model if args.model is not None else policy_file_path(named))
+        check_policy_file(args.model if args.model is not None else policy_file_path(named))
+    return scenario
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
-    _check_before_recording(args)
+    scenario = _check_before_recording(args)
     motions_list = session_motions(args.only, args.repeats)
     protocol = protocol_for(args.style)
     print(f"recording {len(motions_list)} clips for {args.user}: "
@@ -425,10 +426,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         source = (f"simulated-user {args.simulated_user} (population seed {args.population_seed}, seed {args.seed}, "
                   f"style {args.style})")
     else:
-        from rtcohand_drake.scenario import load_scenario
         from rtcohand_drake.systems.gestures.camera import make_tracker
 
-        scenario = load_scenario(args.scenario)
         marker = None
         if args.labels == "aruco":
             from rtcohand_drake.vision.aruco import MarkerConfig, MarkerTracker

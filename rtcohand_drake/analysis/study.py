@@ -300,9 +300,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.bootstrap < 1:
         p.error(f"--bootstrap must be at least 1, got {args.bootstrap}")
     if args.model is not None:
-        from rtcohand_drake.learning.policy_file import load_policy
+        from rtcohand_drake.learning.policy_file import check_policy_file
 
-        load_policy(args.model)  # a missing or damaged file: one line now, not in every run
+        check_policy_file(args.model)  # a missing or damaged file: one line now, not in every run
     if args.address is not None and not re.fullmatch(r"(tcp://)?[^\s:/]+:\d+", args.address):
         p.error(f"--address {args.address!r}: give a Dask scheduler as tcp://HOST:PORT")
     if args.recorded_people is not None:

@@ -523,8 +523,6 @@ def save_scripted(scripted: torch.jit.ScriptModule, out: os.PathLike, card: dict
                   card_name: str = "model_card.json") -> pathlib.Path:
     """Write a scripted module to `out` with `card` as the JSON file `card_name` inside it, atomically
     (a write that fails leaves any earlier file whole)."""
-    from rtcohand_drake.errors import InputError
-
     out = pathlib.Path(out)
     if out.is_dir():
         raise InputError(f"--out {out}: is a folder; give a file path")

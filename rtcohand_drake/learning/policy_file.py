@@ -48,14 +48,21 @@ def torch_archive_kind(path: os.PathLike, expected: str) -> str:
     return "torchscript" if scripted else "pickle"
 
 
+def check_policy_file(path: os.PathLike) -> None:
+    """A PolicyFileError, as `load_policy` would raise it, for a policy file that is missing, not a
+    TorchScript archive, or damaged; without loading it (no torch import): a check before work that
+    loads the file later."""
+    if torch_archive_kind(path, "policy") != "torchscript":
+        raise PolicyFileError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
+                              "python -m rtcohand_drake.export)")
+
+
 def load_policy(path: os.PathLike):
     """Loads an exported policy; a missing, corrupt or wrong file is a PolicyFileError naming it."""
     import torch
 
     path = pathlib.Path(path)
-    if torch_archive_kind(path, "policy") != "torchscript":
-        raise PolicyFileError(f"{path}: not a TorchScript policy (a training checkpoint? export it with "
-                              "python -m rtcohand_drake.export)")
+    check_policy_file(path)
     try:
         module = torch.jit.load(str(path), map_location="cpu")
     except Exception as err:  # torch raises RuntimeError and others for a damaged archive

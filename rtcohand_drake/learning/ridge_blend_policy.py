@@ -182,26 +182,24 @@ class RidgeBlendPolicy(WrappedPolicySteps):
         fitted = torch.zeros(1, dtype=torch.float64)
         gain = torch.full((1,), -1.0, dtype=torch.float64)  # -1: not cross-validated
         cv = torch.full((2,), -1.0, dtype=torch.float64)  # the switch's ridge_cv and cchp_cv; -1: not computed
-        switch = self.switch_below > 0.0 and n_rows > 1
-        if switch:
+        if self.switch_below > 0.0 and n_rows > 1:
             # The folds' sums add up to the whole context's: the ridge read is fitted from them.
             ridge_cv, total = self._ridge_cv(x_c, y_c, m)
             mean, spread, w, y_mean = self._fit_stats(total)
             cv[0] = ridge_cv
-        else:
-            # A clip's steps are its first mask.sum() steps (the context is packed that way, pack_context).
-            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, list(range(n_rows))))
-        if switch:
-            if float(cv[0]) < self.switch_below:
+            if ridge_cv < self.switch_below:
                 cv[1] = self._inner_cv(x_c, y_c, m)
-                if float(cv[0]) < self.switch_ratio * float(cv[1]):
+                if ridge_cv < self.switch_ratio * float(cv[1]):
                     blend = torch.ones(1, dtype=torch.float64)
                 fitted = blend.clone()
                 gain = (1.0 - cv[0] / torch.clamp(cv[1], min=1e-12)).view(1)
-        elif self.blend_folds > 0 and n_rows > 1:
-            fitted_b, gain_b = self._cross_validated_blend(x_c, y_c, m)
-            fitted, gain = fitted_b.view(1), gain_b.view(1)
-            blend = fitted if float(gain_b) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
+        else:
+            # A clip's steps are its first mask.sum() steps (the context is packed that way, pack_context).
+            mean, spread, w, y_mean = self._fit(*self._rows(x_c, y_c, m, list(range(n_rows))))
+            if self.blend_folds > 0 and n_rows > 1:
+                fitted_b, gain_b = self._cross_validated_blend(x_c, y_c, m)
+                fitted, gain = fitted_b.view(1), gain_b.view(1)
+                blend = fitted if float(gain_b) >= self.min_gain else torch.zeros(1, dtype=torch.float64)
         # One (K, D_in + ceil(extras / K)) block whose memory is the inner file's keys, then the ridge's
         # extras: a step reads each as a view, without a copy.
         k = keys_in.size(0)
