@@ -402,6 +402,9 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
     person's own clips (`blend_choice`; the share is checked against its definition above), else 0 and
     the file's output is the CCHP's. A person only the path-and-shape read fits gets it; a person whose
     labels the path and shape do not tell gets the CCHP."""
+    from rtcohand_drake.learning import path_shape_policy as psp
+    from rtcohand_drake.learning.export import read_model_card
+
     inner_path = _inner_policy(tmp_path)
     inner = load_policy(inner_path)
     rng = np.random.default_rng(7)
@@ -434,8 +437,21 @@ def test_the_kernel_read_is_used_only_for_a_person_it_reads_better(tmp_path):
         if name == "untold":  # the CCHP alone, step by step
             for (y, *_), (yi, *_) in _beside_the_cchp(gated, inner, (x_c, y_c, mask), (keys, values, z_mu), target):
                 assert torch.allclose(y, yi, atol=1e-7)
+    # `--min-gain off`: no gain condition; the person the gate refused gets the fitted blend.
+    off_path = build_path_shape_policy(inner_path, tmp_path / "off.pt", bandwidth=0.6, lam=0.01, folds=3,
+                                       commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_gain=psp.GAIN_CONDITION_OFF,
+                                       min_fast_turns=0.0)
+    off = load_policy(off_path)
+    for name, context in (("told", told), ("untold", untold)):
+        x_c, y_c, mask = (torch.from_numpy(a) for a in pack_context(context))
+        used, fitted, gain, cchp_error = (float(v) for v in off.blend_choice(off.encode_context(x_c, y_c, mask)[0]))
+        assert (fitted, gain, cchp_error) == pytest.approx(choices[name], abs=1e-6)
+        assert used == fitted > 0.0
+    assert read_model_card(off_path)["path_shape_read"]["min_gain"] is None
     with pytest.raises(InputError, match="min_gain"):
         build_path_shape_policy(inner_path, tmp_path / "bad.pt", min_gain=1.0)
+    with pytest.raises(InputError, match="min-gain"):
+        psp.main(["--policy", str(inner_path), "--out", str(tmp_path / "bad.pt"), "--min-gain", "-0.1"])
 
 
 GATE_TEST_SETTINGS = dict(bandwidth=0.6, lam=0.01, folds=3, commit=(0.0, 0.2, 0.6), match=NO_MATCH, min_cchp_error=0.0,

@@ -30,7 +30,7 @@ A is `--blend`, or with `--folds F` > 0 (the shipped file: 4) it is chosen for e
 context is encoded: the least-squares blend of the two reads over the person's own clips, each clip
 read with the other folds' clips as context (`_cross_validated_blend`). With `--min-gain G` that
 blend is used only for a person whose clips it reads with at least G less squared error than the
-CCHP alone; for anyone else A = 0 (`blend_choice` gives A, the fitted A and that share). With
+CCHP alone (`--min-gain off`: whatever it gains); for anyone else A = 0 (`blend_choice` gives A, the fitted A and that share). With
 `--min-cchp-error E` (the shipped file: 0.5) it is used only for a person whom the CCHP alone reads
 with at least E of zero twist's squared error over their clips, and with `--min-blend B` (the shipped
 file: 0, any A) only where the fitted A is at least B; anyone else gets the CCHP's own step, exactly. The
@@ -123,6 +123,10 @@ DEFAULT_ANCHORS = 1536
 # development simulated person's share) the file read two of three held-out populations worse than the
 # CCHP alone (docs/policy.md).
 DEFAULT_MIN_GAIN = 0.0
+# `--min-gain off`: no gain condition (a gain near zero on a person's own folds decides nothing; a person
+# whom the other conditions admit gets the fitted blend whatever its sign: docs/policy.md, "The CCHP trained
+# longer").
+GAIN_CONDITION_OFF = float("-inf")
 # The kernel read steps in only for a person whom the CCHP alone, cross-validated over their own clips, reads
 # with at least this share of zero twist's squared error; anyone else gets the CCHP alone, exactly. Chosen on
 # development people (docs/policy.md, "One file for every hand"): the CCHP's share was 0.08-0.18 for the 90
@@ -181,8 +185,9 @@ class PathShapeKernelPolicy(WrappedPolicySteps):
             raise InputError(f"hold {tuple(hold)}: {err}") from None
         # The command hold the box applies to this file's output (learning.command_hold); share 0: none.
         self.command_hold = [float(v) for v in hold]
-        if anchors < 2 or not 0.0 <= min_gain < 1.0 or not 0.0 <= min_cchp_error < 10.0 or not 0.0 <= min_blend < 10.0:
-            raise InputError(f"anchors must be at least 2, min_gain in [0, 1), min_cchp_error in [0, 10) and "
+        gain_ok = min_gain == GAIN_CONDITION_OFF or 0.0 <= min_gain < 1.0
+        if anchors < 2 or not gain_ok or not 0.0 <= min_cchp_error < 10.0 or not 0.0 <= min_blend < 10.0:
+            raise InputError(f"anchors must be at least 2, min_gain in [0, 1) or off, min_cchp_error in [0, 10) and "
                              f"min_blend in [0, 10); got {anchors}, {min_gain}, {min_cchp_error}, {min_blend}")
         # A person's kernel read is used only if, over their own clips, the fitted blend removes at least
         # this share of the CCHP's squared error (else A = 0: the CCHP alone).
@@ -673,6 +678,19 @@ def turned_away_by_fast_turns(module, x_c, mask) -> bool:
     return float(module.fast_turn_share(x, m)) < float(module.min_fast_turns)
 
 
+def _min_gain(text: str) -> float:
+    """`--min-gain`: a share in [0, 1), or 'off' (GAIN_CONDITION_OFF)."""
+    if text.strip().lower() == "off":
+        return GAIN_CONDITION_OFF
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a share in [0, 1) or 'off', got {text!r}")
+    return value
+
+
 def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float = DEFAULT_BLEND,
                             bandwidth: float = DEFAULT_BANDWIDTH, lam: float = DEFAULT_LAMBDA,
                             folds: int = DEFAULT_CV_FOLDS, rows: int = DEFAULT_CV_ROWS,
@@ -701,7 +719,8 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
                                                           min_blend, min_fast_turns).eval())
     card = dict(card, path_shape_read={
         "inner_policy": pathlib.Path(policy).name, "blend": blend, "bandwidth": bandwidth, "lambda": lam,
-        "blend_folds": folds, "blend_rows": rows, "anchors": anchors, "min_gain": min_gain,
+        "blend_folds": folds, "blend_rows": rows, "anchors": anchors,
+        "min_gain": None if min_gain == GAIN_CONDITION_OFF else min_gain,
         "min_cchp_error": min_cchp_error,
         **({"min_blend": min_blend} if min_blend > 0 else {}),
         **({"min_fast_turns": min_fast_turns, "fast_turn_rad_s": FAST_TURN_RAD_S} if min_fast_turns > 0 else {}),
@@ -716,7 +735,9 @@ def build_path_shape_policy(policy: os.PathLike, out: os.PathLike, blend: float 
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m rtcohand_drake.learning.path_shape_policy",
+    from rtcohand_drake.errors import ArgumentParser
+
+    p = ArgumentParser(prog="python -m rtcohand_drake.learning.path_shape_policy",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--policy", required=True, help="an exported 36-feature CCHP policy file")
     p.add_argument("--out", required=True)
@@ -737,9 +758,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--anchors", type=int, default=DEFAULT_ANCHORS,
                    help="the context steps the kernel read is fitted on, at most (a longer context: that many, "
                         "spread evenly over it)")
-    p.add_argument("--min-gain", type=float, default=DEFAULT_MIN_GAIN,
+    p.add_argument("--min-gain", type=_min_gain, default=DEFAULT_MIN_GAIN,
                    help="use a person's kernel read only if the fitted blend removes at least this share of the "
-                        "CCHP's squared error over their own clips")
+                        "CCHP's squared error over their own clips ('off': no such condition)")
     p.add_argument("--min-cchp-error", type=float, default=DEFAULT_MIN_CCHP_ERROR,
                    help="use a person's kernel read only if the CCHP alone, cross-validated over their own clips, "
                         "reads them with at least this share of zero twist's squared error (0: for anyone)")
