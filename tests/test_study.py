@@ -348,3 +348,16 @@ def test_two_studies_compare_person_by_person(load_script, tmp_path, capsys):
     assert "| joystick | 3 | 2.400 (" in rows[1]
     (tmp_path / "c.json").write_text(json.dumps(dict(second, populations=[1])))
     assert script.main(["--first", str(tmp_path / "a.json"), "--second", str(tmp_path / "c.json")]) == 2
+
+
+def test_the_progress_line_of_a_finished_run_says_done_not_failed(capsys):
+    """A run that succeeded, with no describer, is reported as done; a failed one as failed, with its error."""
+    from rtcohand_drake.analysis.engine import Outcome, _Progress
+
+    progress = _Progress(2, "runs", True, None)
+    progress.finished(Outcome(key="u10", value={"completed": True}, attempts=1))
+    progress.finished(Outcome(key="u11", error="ValueError: bad", attempts=2))
+    progress.close()
+    lines = [line.strip() for line in capsys.readouterr().err.replace("\r", "\n").splitlines()]
+    assert "u10: done" in lines and not any(line.startswith("u10: failed") for line in lines)
+    assert "u11: failed after 2 attempts: ValueError: bad" in lines

@@ -132,8 +132,10 @@ class _Progress:
         self._bar.set_postfix(failed=self._failed, refresh=False)
         self._bar.update(1)
         if self._show:
-            line = (self._describe(outcome) if self._describe and outcome.ok
-                    else f"{outcome.key}: failed after {outcome.attempts} attempts: {outcome.error}")
+            if not outcome.ok:
+                line = f"{outcome.key}: failed after {outcome.attempts} attempts: {outcome.error}"
+            else:
+                line = self._describe(outcome) if self._describe else f"{outcome.key}: done"
             self._bar.write(line, file=sys.stderr)
 
     def close(self) -> None:
