@@ -274,7 +274,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert card["path_shape_read"] == {
         "inner_policy": "cchp_default.pt", "blend": psp.DEFAULT_BLEND, "bandwidth": psp.DEFAULT_BANDWIDTH,
         "lambda": psp.DEFAULT_LAMBDA, "blend_folds": psp.DEFAULT_CV_FOLDS, "blend_rows": psp.DEFAULT_CV_ROWS,
-        "anchors": psp.DEFAULT_ANCHORS, "min_gain": psp.DEFAULT_MIN_GAIN, "min_cchp_error": psp.DEFAULT_MIN_CCHP_ERROR,
+        "anchors": psp.DEFAULT_ANCHORS, "min_gain": None, "min_cchp_error": psp.DEFAULT_MIN_CCHP_ERROR,
         "min_fast_turns": psp.DEFAULT_MIN_FAST_TURNS, "fast_turn_rad_s": psp.FAST_TURN_RAD_S,
         "feature_dim": FEATURE_DIM + PATH_SHAPE_DIM, "commit": [psp.COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH],
         "match": [psp.MATCH_SHARE, psp.MATCH_VELOCITY_WEIGHT, psp.MATCH_TAU], "match_max_steps": psp.MATCH_MAX_STEPS,
@@ -286,7 +286,7 @@ def test_the_shipped_path_shape_file_is_the_shipped_cchp_with_the_chosen_read():
     assert (wide.kernel_blend, wide.kernel_bandwidth, wide.kernel_lambda, wide.blend_folds, wide.blend_rows) == (
         psp.DEFAULT_BLEND, psp.DEFAULT_BANDWIDTH, psp.DEFAULT_LAMBDA, psp.DEFAULT_CV_FOLDS, psp.DEFAULT_CV_ROWS)
     assert (wide.kernel_anchors, wide.min_gain, wide.min_cchp_error) == (
-        psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, 0.0, 0.5)
+        psp.DEFAULT_ANCHORS, psp.DEFAULT_MIN_GAIN, psp.DEFAULT_MIN_CCHP_ERROR) == (1536, float("-inf"), 0.5)
     assert (wide.min_fast_turns, wide.fast_turn_rad_s) == (psp.DEFAULT_MIN_FAST_TURNS, psp.FAST_TURN_RAD_S) == (0.1, 2.0)
     assert (wide.commit_share, wide.commit_low, wide.commit_high) == (0.5, 0.2, 0.6) == (
         psp.DEFAULT_COMMIT_SHARE, psp.COMMIT_LOW, psp.COMMIT_HIGH)
