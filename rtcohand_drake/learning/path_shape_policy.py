@@ -30,10 +30,11 @@ A is `--blend`, or with `--folds F` > 0 (the shipped file: 4) it is chosen for e
 context is encoded: the least-squares blend of the two reads over the person's own clips, each clip
 read with the other folds' clips as context (`_cross_validated_blend`). With `--min-gain G` that
 blend is used only for a person whose clips it reads with at least G less squared error than the
-CCHP alone (`--min-gain off`: whatever it gains); for anyone else A = 0 (`blend_choice` gives A,
-the fitted A and that share). With `--min-cchp-error E` (the shipped file: 0.5) it is used only
-for a person whom the CCHP alone reads with at least E of zero twist's squared error over their clips, and with `--min-blend B` (the shipped
-file: 0, any A) only where the fitted A is at least B; anyone else gets the CCHP's own step, exactly. The
+CCHP alone (`--min-gain off`, the shipped file: whatever it gains); for anyone else A = 0
+(`blend_choice` gives A, the fitted A and that share). With `--min-cchp-error E` (the shipped file:
+0.5) it is used only for a person whom the CCHP alone reads with at least E of zero twist's squared
+error over their clips, and with `--min-blend B` (the shipped file: 0, any A) only where the fitted A
+is at least B; anyone else gets the CCHP's own step, exactly. The
 kernel read suits recorded people, whose few strokes differ in posture and path; the CCHP suits
 sustained motions and the simulated people it was trained on.
 
